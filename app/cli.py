@@ -1,0 +1,172 @@
+"""The roadview command line: data, calibrate, process, evaluate."""
+
+from __future__ import annotations
+
+import json
+import sys
+import traceback
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from app.errors import InputError
+from camera_cal import (
+    CalibrationError,
+    calibrate,
+    default_calibration_path,
+    load_calibration,
+    save_calibration,
+)
+from camera_cal.calibration import list_images
+
+cli = typer.Typer(
+    name="roadview",
+    help="Annotate dashcam video with the ego lane and surrounding vehicles.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+USER_ERRORS: tuple[type[Exception], ...] = (InputError, CalibrationError)
+_verbose = False
+
+
+@cli.callback()
+def _options(
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Show tracebacks.")] = False,
+) -> None:
+    global _verbose
+    _verbose = verbose
+
+
+def _parse_board(board: str) -> tuple[int, int]:
+    try:
+        cols, rows = (int(v) for v in board.lower().split("x"))
+    except ValueError:
+        raise InputError(f"--board {board!r} is not COLSxROWS of inner corners, e.g. 9x6") from None
+    if cols < 2 or rows < 2:
+        raise InputError("--board needs at least 2x2 inner corners")
+    return cols, rows
+
+
+@cli.command("data")
+def data_command(
+    source: Annotated[Path, typer.Option(help="Shared data folder to copy from.")] = Path(
+        "../shared/data"
+    ),
+    dest: Annotated[Path, typer.Option(help="Where the data set goes.")] = Path("data"),
+) -> None:
+    """Copy the data set from the shared folder (or download the public files) into DEST."""
+    from app.data import gather
+
+    added = gather(source, dest, log=lambda m: typer.echo(m, err=True))
+    typer.echo(f"data ready in {dest} ({added} files added)")
+
+
+@cli.command("calibrate")
+def calibrate_command(
+    images: Annotated[Path, typer.Option(help="Folder of chessboard photos.")] = Path(
+        "data/camera_cal"
+    ),
+    board: Annotated[str, typer.Option(help="Inner corners per row x per column.")] = "9x6",
+    out: Annotated[Path, typer.Option(help="Calibration JSON to write.")] = Path(
+        "camera_cal/dashcam.json"
+    ),
+) -> None:
+    """Calibrate the camera from chessboard photos and save the matrix and distortion as JSON."""
+    size = _parse_board(board)
+    calibration = calibrate(list_images(images), board=size)
+    for skipped in calibration.images_skipped:
+        typer.echo(f"skipped {skipped}", err=True)
+    try:
+        save_calibration(calibration, out)
+    except OSError as error:
+        raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
+    m = calibration.camera_matrix
+    typer.echo(
+        f"calibrated from {len(calibration.images_used)} of "
+        f"{len(calibration.images_used) + len(calibration.images_skipped)} images: "
+        f"RMS reprojection error {calibration.rms:.3f} px, fx {m[0, 0]:.1f}, fy {m[1, 1]:.1f}, "
+        f"cx {m[0, 2]:.1f}, cy {m[1, 2]:.1f}; saved {out}"
+    )
+
+
+def default_output(source: Path) -> Path:
+    """NAME_roadview.EXT next to the input."""
+    return source.with_name(f"{source.stem}_roadview{source.suffix}")
+
+
+@cli.command("process")
+def process_command(
+    source: Annotated[Path, typer.Argument(metavar="INPUT", help="Video or still image.")],
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="Output file [NAME_roadview.EXT].")
+    ] = None,
+    record: Annotated[
+        Path | None, typer.Option("--json", help="Per-frame JSON-lines record.")
+    ] = None,
+    calibration: Annotated[
+        str, typer.Option(help="Calibration JSON, or 'none' to skip undistortion.")
+    ] = str(default_calibration_path()),
+    start: Annotated[float, typer.Option(help="Start time in seconds.")] = 0.0,
+    end: Annotated[float | None, typer.Option(help="End time in seconds.")] = None,
+) -> None:
+    """Undistort and annotate a video or still; optionally write the per-frame record."""
+    from app.pipeline import Pipeline, process_still, process_video
+    from app.video import is_image
+
+    cal = None if calibration.lower() == "none" else load_calibration(Path(calibration))
+    output = output if output is not None else default_output(source)
+    if output.resolve() == source.resolve():
+        raise InputError("output would overwrite the input; choose another -o")
+    pipeline = Pipeline(cal, stages=[])
+    if is_image(source):
+        summary = process_still(source, output, pipeline, record)
+    else:
+        if is_image(output):
+            raise InputError(
+                f"output {output} is an image name but the input is a video; use an .mp4 name"
+            )
+        summary = process_video(source, output, pipeline, record, start_s=start, end_s=end)
+    typer.echo(
+        f"wrote {summary.output} ({summary.frames} frames, {summary.fps:.1f} fps)"
+        + (f" and {summary.record}" if summary.record else "")
+    )
+
+
+@cli.command("evaluate")
+def evaluate_command(
+    labels: Annotated[Path, typer.Option(help="Labels JSON of the clip.")],
+    record: Annotated[Path, typer.Option(help="Record written by 'process --json'.")],
+    warmup: Annotated[int, typer.Option(help="Frames not scored at the start.")] = 10,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Score a record against hand-made labels (vehicles by IoU, lane x error per row)."""
+    from app.evaluate import evaluate, format_report, load_labels
+    from app.record import read_record
+
+    scores = evaluate(load_labels(labels), read_record(record), warmup=warmup)
+    typer.echo(json.dumps(scores) if as_json else format_report(scores))
+
+
+def main() -> None:
+    """Entry point: run the CLI, turning expected failures into one line and a non-zero exit."""
+    try:
+        cli()
+    except USER_ERRORS as error:
+        if _verbose:
+            traceback.print_exc()
+        typer.echo(f"roadview: error: {error}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        typer.echo("roadview: interrupted; no output was written", err=True)
+        sys.exit(130)
+    except Exception as error:
+        if _verbose:
+            traceback.print_exc()
+        typer.echo(
+            f"roadview: unexpected {type(error).__name__}: {error} "
+            "(rerun with --verbose for details)",
+            err=True,
+        )
+        sys.exit(1)

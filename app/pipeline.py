@@ -1,0 +1,171 @@
+"""The frame pipeline: undistort, run each stage, compose; and the video/still drivers around it."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+from app.atomic import atomic_output
+from app.errors import InputError
+from app.progress import Progress
+from app.record import frame_record, write_record_line
+from app.stages import FrameStage, StageResult
+from app.video import Frame, VideoWriter, probe_video, read_frames, read_image, write_image
+from camera_cal import Calibration, CalibrationError, Undistorter, build_undistorter
+
+Compositor = Callable[[Frame, Mapping[str, StageResult], float], Frame]
+
+
+def plain_compositor(frame: Frame, results: Mapping[str, StageResult], fps: float) -> Frame:
+    """No overlay: the undistorted frame as it is."""
+    return frame
+
+
+@dataclass
+class FrameOutput:
+    """Everything the pipeline made of one frame."""
+
+    undistorted: Frame
+    results: dict[str, StageResult]
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+class Pipeline:
+    """Undistorts frames of one size and runs the stages on them in order."""
+
+    def __init__(self, calibration: Calibration | None, stages: Sequence[FrameStage]) -> None:
+        self.calibration = calibration
+        self.stages = list(stages)
+        self._undistorter: Undistorter | None = None
+
+    def prepare(self, size: tuple[int, int]) -> None:
+        """Build the undistortion maps for frames of `size` and reset stage history."""
+        if self.calibration is not None:
+            try:
+                self._undistorter = build_undistorter(self.calibration, size)
+            except CalibrationError as error:
+                raise InputError(str(error)) from None
+        for stage in self.stages:
+            stage.reset()
+
+    def undistort(self, frame: Frame) -> Frame:
+        """The undistorted frame (or the frame itself with no calibration)."""
+        if self._undistorter is None:
+            return frame
+        if (frame.shape[1], frame.shape[0]) != self._undistorter.size:
+            self.prepare((frame.shape[1], frame.shape[0]))
+            assert self._undistorter is not None
+        return self._undistorter(frame)
+
+    def run(self, frame: Frame) -> FrameOutput:
+        """Undistort one frame and pass it through every stage."""
+        t0 = time.perf_counter()
+        undistorted = self.undistort(frame)
+        timings = {"undistort": (time.perf_counter() - t0) * 1000}
+        results: dict[str, StageResult] = {}
+        for stage in self.stages:
+            t0 = time.perf_counter()
+            results[stage.record_key] = stage.process(undistorted)
+            timings[stage.record_key] = (time.perf_counter() - t0) * 1000
+        return FrameOutput(undistorted=undistorted, results=results, timings_ms=timings)
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a processing run did."""
+
+    frames: int
+    seconds: float
+    output: Path
+    record: Path | None
+
+    @property
+    def fps(self) -> float:
+        """End-to-end frames per second."""
+        return self.frames / self.seconds if self.seconds > 0 else math.inf
+
+
+def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) -> tuple[int, int]:
+    """First and one-past-last frame index for a time range in seconds."""
+    if start_s < 0 or (end_s is not None and end_s <= start_s):
+        raise InputError("--start must be >= 0 and --end later than --start")
+    first = round(start_s * fps)
+    last = n_frames if end_s is None else min(n_frames, round(end_s * fps))
+    if first >= n_frames:
+        raise InputError(f"--start {start_s}s is past the end of the video ({n_frames / fps:.2f}s)")
+    return first, last
+
+
+def process_video(
+    source: Path,
+    output: Path,
+    pipeline: Pipeline,
+    record: Path | None = None,
+    compositor: Compositor = plain_compositor,
+    start_s: float = 0.0,
+    end_s: float | None = None,
+) -> RunSummary:
+    """Process a video into an annotated video (and record); outputs appear only on success."""
+    info = probe_video(source)
+    first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
+    pipeline.prepare(info.size)
+    started = time.perf_counter()
+    count = 0
+    progress = Progress(last - first, label=source.name)
+    with ExitStack() as outputs:
+        # Temporary files are renamed into place only when the block ends without an error.
+        video_tmp = outputs.enter_context(atomic_output(output))
+        handle: TextIO | None = None
+        if record is not None:
+            handle = outputs.enter_context(outputs.enter_context(atomic_output(record)).open("w"))
+        writer = VideoWriter(
+            video_tmp,
+            info.size,
+            info.fps,
+            audio_from=source if info.has_audio else None,
+            audio_start_s=first / info.fps,
+            audio_end_s=last / info.fps if end_s is not None else None,
+        )
+        try:
+            for offset, frame in enumerate(read_frames(source, info, first, last)):
+                index = first + offset
+                out = pipeline.run(frame)
+                writer.write(compositor(out.undistorted, out.results, progress.fps))
+                if handle is not None:
+                    write_record_line(handle, frame_record(index, index / info.fps, out.results))
+                count += 1
+                progress.update()
+            progress.close()
+            if count == 0:
+                raise InputError(f"{source} yielded no frames; the file may be truncated")
+        except BaseException:
+            writer.abort()
+            raise
+        writer.close()
+    return RunSummary(count, time.perf_counter() - started, output, record)
+
+
+def process_still(
+    source: Path,
+    output: Path,
+    pipeline: Pipeline,
+    record: Path | None = None,
+    compositor: Compositor = plain_compositor,
+) -> RunSummary:
+    """Process one still image into an annotated image (and a one-line record)."""
+    image = read_image(source)
+    started = time.perf_counter()
+    pipeline.prepare((image.shape[1], image.shape[0]))
+    out = pipeline.run(image)
+    composed = compositor(out.undistorted, out.results, 0.0)
+    with ExitStack() as outputs:
+        write_image(outputs.enter_context(atomic_output(output)), composed)
+        if record is not None:
+            with outputs.enter_context(atomic_output(record)).open("w") as handle:
+                write_record_line(handle, frame_record(0, 0.0, out.results))
+    return RunSummary(1, time.perf_counter() - started, output, record)

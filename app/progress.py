@@ -1,0 +1,46 @@
+"""A one-line progress bar with frames per second, shown only on a terminal."""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+
+class Progress:
+    """Redraws `label [#####.....] i/n  fps` on stderr at most ten times a second."""
+
+    def __init__(self, total: int, label: str = "", stream: TextIO | None = None) -> None:
+        self.total = max(total, 1)
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = self.stream.isatty()
+        self.count = 0
+        self.started = time.perf_counter()
+        self._last_draw = 0.0
+
+    @property
+    def fps(self) -> float:
+        """Frames per second so far."""
+        elapsed = time.perf_counter() - self.started
+        return self.count / elapsed if elapsed > 0 else 0.0
+
+    def update(self, n: int = 1) -> None:
+        """Count n more frames done."""
+        self.count += n
+        now = time.perf_counter()
+        if self.enabled and (now - self._last_draw > 0.1 or self.count >= self.total):
+            self._last_draw = now
+            width = 30
+            filled = int(width * min(self.count / self.total, 1.0))
+            bar = "#" * filled + "." * (width - filled)
+            self.stream.write(
+                f"\r{self.label} [{bar}] {self.count}/{self.total} {self.fps:5.1f} fps"
+            )
+            self.stream.flush()
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()

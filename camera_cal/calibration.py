@@ -1,0 +1,192 @@
+"""Chessboard calibration: find corners, solve for the camera matrix, persist as small JSON."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+FORMAT_VERSION = 1
+SIZE_SLACK = 2  # pixels by which a photo may exceed the common size
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
+
+
+class CalibrationError(Exception):
+    """A calibration cannot be computed, read, or applied; the message says what to do."""
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Pinhole camera matrix and distortion coefficients for one camera at one image size."""
+
+    camera_matrix: NDArray[np.float64]
+    dist_coeffs: NDArray[np.float64]
+    image_size: tuple[int, int]  # (width, height) of the calibration images
+    rms: float = 0.0
+    images_used: tuple[str, ...] = field(default_factory=tuple)
+    images_skipped: tuple[str, ...] = field(default_factory=tuple)
+
+
+def default_calibration_path() -> Path:
+    """The committed calibration of the shared dashcam."""
+    return Path(__file__).with_name("dashcam.json")
+
+
+def find_board_corners(
+    gray: NDArray[np.uint8], board: tuple[int, int]
+) -> NDArray[np.float32] | None:
+    """Inner corners of a (cols, rows) chessboard refined to sub-pixel accuracy, or None."""
+    found, corners = cv2.findChessboardCorners(gray, board)
+    if not found:
+        # The sector-based detector copes with blur and strong lens distortion at the edges.
+        found, corners = cv2.findChessboardCornersSB(gray, board)
+        if not found:
+            return None
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+    refined = cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), criteria)
+    return np.asarray(refined, dtype=np.float32).reshape(-1, 2)
+
+
+def _board_object_points(board: tuple[int, int]) -> NDArray[np.float32]:
+    """Board corner coordinates in board units on the z = 0 plane."""
+    cols, rows = board
+    grid = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2)
+    return np.hstack([grid, np.zeros((grid.shape[0], 1))]).astype(np.float32)
+
+
+def list_images(folder: Path) -> list[Path]:
+    """Image files in a folder, sorted naturally (calibration2 before calibration10)."""
+    if not folder.is_dir():
+        raise CalibrationError(
+            f"{folder} is not a folder; pass --images DIR with chessboard photos"
+        )
+    files = [p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES]
+
+    def natural(p: Path) -> tuple[str, int]:
+        stem = p.stem.rstrip("0123456789")
+        digits = p.stem[len(stem) :]
+        return stem, int(digits) if digits else -1
+
+    return sorted(files, key=natural)
+
+
+def calibrate(
+    paths: Sequence[Path], board: tuple[int, int] = (9, 6), min_boards: int = 5
+) -> Calibration:
+    """Calibrate from chessboard photos; photos without the whole board are skipped and named."""
+    if not paths:
+        raise CalibrationError(
+            "no chessboard images given; pass --images DIR with .jpg/.png photos"
+        )
+    object_grid = _board_object_points(board)
+    images: list[tuple[str, NDArray[np.uint8] | None]] = [
+        (path.name, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)) for path in paths
+    ]
+    sizes = Counter((im.shape[1], im.shape[0]) for _, im in images if im is not None)
+    if not sizes:
+        raise CalibrationError("none of the chessboard files could be read as an image")
+    size = sizes.most_common(1)[0][0]
+    object_points: list[NDArray[np.float32]] = []
+    image_points: list[NDArray[np.float32]] = []
+    used: list[str] = []
+    skipped: list[str] = []
+    for name, image in images:
+        if image is None:
+            skipped.append(f"{name}: not an image")
+            continue
+        if abs(image.shape[1] - size[0]) > SIZE_SLACK or abs(image.shape[0] - size[1]) > SIZE_SLACK:
+            skipped.append(f"{name}: size {image.shape[1]}x{image.shape[0]} differs")
+            continue
+        # A photo a pixel or two larger (seen in the dashcam set) is cropped to the common size.
+        corners = find_board_corners(image[: size[1], : size[0]], board)
+        if corners is None:
+            skipped.append(f"{name}: whole board not found")
+            continue
+        object_points.append(object_grid)
+        image_points.append(corners)
+        used.append(name)
+    if len(used) < min_boards:
+        raise CalibrationError(
+            f"only {len(used)} of {len(paths)} images show the whole {board[0]}x{board[1]} board "
+            f"(need {min_boards}); check --board (inner corners, e.g. 9x6) or add photos"
+        )
+    rms, matrix, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
+    return Calibration(
+        camera_matrix=np.asarray(matrix, dtype=np.float64),
+        dist_coeffs=np.asarray(dist, dtype=np.float64).ravel(),
+        image_size=size,
+        rms=float(rms),
+        images_used=tuple(used),
+        images_skipped=tuple(skipped),
+    )
+
+
+def save_calibration(calibration: Calibration, path: Path) -> None:
+    """Write the calibration as JSON, atomically (temporary file renamed into place)."""
+    document = {
+        "format_version": FORMAT_VERSION,
+        "camera_matrix": np.round(calibration.camera_matrix, 6).tolist(),
+        "dist_coeffs": np.round(calibration.dist_coeffs, 8).tolist(),
+        "image_size": list(calibration.image_size),
+        "rms": round(calibration.rms, 6),
+        "images_used": list(calibration.images_used),
+        "images_skipped": list(calibration.images_skipped),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as handle:
+            json.dump(document, handle, indent=2)
+            handle.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_calibration(path: Path) -> Calibration:
+    """Read a calibration JSON, checking its version and shapes."""
+    try:
+        document = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise CalibrationError(
+            f"calibration file {path} does not exist; run 'roadview calibrate'"
+        ) from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise CalibrationError(
+            f"calibration file {path} is not valid JSON ({error}); run 'roadview calibrate'"
+        ) from None
+    if not isinstance(document, dict) or document.get("format_version") != FORMAT_VERSION:
+        raise CalibrationError(
+            f"calibration file {path} is not a roadview calibration of format {FORMAT_VERSION}; "
+            "run 'roadview calibrate' to make one"
+        )
+    try:
+        matrix = np.asarray(document["camera_matrix"], dtype=np.float64)
+        dist = np.asarray(document["dist_coeffs"], dtype=np.float64).ravel()
+        width, height = (int(v) for v in document["image_size"])
+        rms = float(document.get("rms", 0.0))
+    except (KeyError, TypeError, ValueError):
+        raise CalibrationError(
+            f"calibration file {path} lacks a field or has a wrong one; run 'roadview calibrate'"
+        ) from None
+    if matrix.shape != (3, 3) or dist.size not in (4, 5, 8, 12, 14) or width <= 0 or height <= 0:
+        raise CalibrationError(
+            f"calibration file {path} has wrong shapes; run 'roadview calibrate' to remake it"
+        )
+    return Calibration(
+        camera_matrix=matrix,
+        dist_coeffs=dist,
+        image_size=(width, height),
+        rms=rms,
+        images_used=tuple(document.get("images_used", ())),
+        images_skipped=tuple(document.get("images_skipped", ())),
+    )

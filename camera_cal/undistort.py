@@ -1,0 +1,64 @@
+"""Undistortion with remap maps precomputed once per frame size."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from camera_cal.calibration import Calibration, CalibrationError
+
+ASPECT_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class Undistorter:
+    """Maps a distorted frame of one size to the undistorted frame (same size, same matrix)."""
+
+    size: tuple[int, int]  # (width, height)
+    camera_matrix: NDArray[np.float64]
+    map1: NDArray[np.int16]
+    map2: NDArray[np.uint16]
+
+    def __call__(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """Undistort one frame; its size must be the one this undistorter was built for."""
+        height, width = frame.shape[:2]
+        if (width, height) != self.size:
+            raise CalibrationError(
+                f"frame is {width}x{height} but the undistorter was built for "
+                f"{self.size[0]}x{self.size[1]}"
+            )
+        out = cv2.remap(frame, self.map1, self.map2, interpolation=cv2.INTER_LINEAR)
+        return np.asarray(out, dtype=np.uint8)
+
+
+def scaled_camera_matrix(calibration: Calibration, size: tuple[int, int]) -> NDArray[np.float64]:
+    """The camera matrix for frames of another size with the same aspect ratio (same camera)."""
+    width, height = size
+    cal_width, cal_height = calibration.image_size
+    if (width, height) == (cal_width, cal_height):
+        return calibration.camera_matrix.copy()
+    if abs(width / height - cal_width / cal_height) > ASPECT_TOLERANCE * cal_width / cal_height:
+        raise CalibrationError(
+            f"frame is {width}x{height} but the calibration is for {cal_width}x{cal_height} with "
+            "another aspect ratio; calibrate this camera or pass --calibration none"
+        )
+    sx, sy = width / cal_width, height / cal_height
+    matrix = calibration.camera_matrix.copy()
+    # Pixel centres move with the half-pixel convention: x' = (x + 0.5) * s - 0.5.
+    matrix[0, 0] *= sx
+    matrix[1, 1] *= sy
+    matrix[0, 2] = (matrix[0, 2] + 0.5) * sx - 0.5
+    matrix[1, 2] = (matrix[1, 2] + 0.5) * sy - 0.5
+    return matrix
+
+
+def build_undistorter(calibration: Calibration, size: tuple[int, int]) -> Undistorter:
+    """Precompute fixed-point remap maps for frames of `size` (width, height)."""
+    matrix = scaled_camera_matrix(calibration, size)
+    map1, map2 = cv2.initUndistortRectifyMap(
+        matrix, calibration.dist_coeffs, None, matrix, size, cv2.CV_16SC2
+    )
+    return Undistorter(size=size, camera_matrix=matrix, map1=map1, map2=map2)

@@ -1,0 +1,36 @@
+"""Helpers for tests that run the roadview command line as a user would."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from app.video import VideoInfo, probe_video, read_frames
+
+
+def run_cli(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """Run `roadview ARGS` in a subprocess and capture its output."""
+    return subprocess.run(
+        [sys.executable, "-m", "app", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+    )
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess[str], *fragments: str) -> None:
+    """A failure shown as one clear line, no traceback, non-zero exit."""
+    assert result.returncode != 0, result.stdout
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def count_frames(path: Path) -> tuple[VideoInfo, int]:
+    """Container info and the number of frames actually decoded."""
+    info = probe_video(path)
+    return info, sum(1 for _ in read_frames(path, info))
