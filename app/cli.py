@@ -19,6 +19,8 @@ from camera_cal import (
     save_calibration,
 )
 from camera_cal.calibration import list_images
+from vehicles.dataset import DatasetError
+from vehicles.model import ModelError
 
 cli = typer.Typer(
     name="roadview",
@@ -27,7 +29,7 @@ cli = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-USER_ERRORS: tuple[type[Exception], ...] = (InputError, CalibrationError)
+USER_ERRORS: tuple[type[Exception], ...] = (InputError, CalibrationError, DatasetError, ModelError)
 _verbose = False
 
 
@@ -147,6 +149,82 @@ def evaluate_command(
 
     scores = evaluate(load_labels(labels), read_record(record), warmup=warmup)
     typer.echo(json.dumps(scores) if as_json else format_report(scores))
+
+
+@cli.command("train")
+def train_command(
+    data: Annotated[
+        Path, typer.Option(help="Folder with vehicles(.zip) and non-vehicles(.zip).")
+    ] = Path("data"),
+    out: Annotated[Path, typer.Option(help="Model file to write.")] = Path(
+        "vehicles/models/default.npz"
+    ),
+    hard_negatives: Annotated[
+        Path | None, typer.Option(help="Folder of extra non-vehicle patches mined from frames.")
+    ] = None,
+    jobs: Annotated[int, typer.Option(help="Parallel workers.")] = 2,
+) -> None:
+    """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
+    from app.progress import Progress
+    from vehicles.dataset import load_patch_folder, load_patches
+    from vehicles.model import save_model
+    from vehicles.train import TrainConfig, format_training_report, train_model
+
+    patches = load_patches(data)
+    extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
+    bar = Progress(len(patches), label="features")
+
+    def progress(done: int, total: int) -> None:
+        bar.update(done - bar.count)
+
+    model = train_model(
+        patches,
+        cfg=TrainConfig(n_jobs=jobs),
+        progress=progress,
+        log=lambda m: typer.echo(m, err=True),
+        extra_negatives=extra,
+    )
+    bar.close()
+    try:
+        save_model(model, out)
+    except OSError as error:
+        raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
+    typer.echo(format_training_report(model.report))
+    typer.echo(f"saved {out}")
+
+
+@cli.command("evaluate-classifier")
+def evaluate_classifier_command(
+    data: Annotated[Path, typer.Option(help="Folder with vehicles/ and non-vehicles/ patches.")],
+    model: Annotated[Path | None, typer.Option(help="Model file [the shipped one].")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Accuracy, precision and recall of the classifier on folders of patches of any size."""
+    from vehicles.dataset import load_patches
+    from vehicles.model import default_model_path, load_model
+    from vehicles.train import extract_features, scores
+
+    classifier = load_model(model if model is not None else default_model_path())
+    patches = load_patches(data, classifier.config.patch_size)
+    x = extract_features(patches.images, classifier.config)
+    result = scores(patches.labels, classifier.predict(x))
+    summary = {
+        "accuracy": result["accuracy"],
+        "precision": result["precision"],
+        "recall": result["recall"],
+        "n_vehicles": int((patches.labels == 1).sum()),
+        "n_non_vehicles": int((patches.labels == 0).sum()),
+    }
+    if as_json:
+        typer.echo(json.dumps(summary))
+    else:
+        (tn, fp), (fn, tp) = result["confusion_matrix"]
+        typer.echo(
+            f"accuracy {100 * summary['accuracy']:.2f} %, precision {summary['precision']:.4f}, "
+            f"recall {summary['recall']:.4f}\nvehicles {summary['n_vehicles']}: {tp} found, "
+            f"{fn} missed; non-vehicles {summary['n_non_vehicles']}: {tn} rejected, {fp} false "
+            "alarms"
+        )
 
 
 def main() -> None:

@@ -106,3 +106,28 @@ def test_calibrate_cli_writes_json(data_dir: Path, tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert "RMS reprojection error" in result.stdout
     assert json.loads(out.read_text())["image_size"] == [1280, 720]
+
+
+def test_evaluate_classifier_cli(data_dir: Path, tmp_path: Path) -> None:
+    import zipfile
+
+    for kind in ("vehicles", "non-vehicles"):
+        (tmp_path / kind).mkdir()
+        with zipfile.ZipFile(data_dir / f"{kind}.zip") as archive:
+            names = sorted(n for n in archive.namelist() if n.endswith(".png"))[::400]
+            for name in names:
+                image = cv2.imdecode(np.frombuffer(archive.read(name), np.uint8), cv2.IMREAD_COLOR)
+                # Other sizes are resized to the model's patch size.
+                cv2.imwrite(str(tmp_path / kind / Path(name).name), cv2.resize(image, (96, 96)))
+    result = run_cli("evaluate-classifier", "--data", tmp_path, "--json")
+    assert result.returncode == 0, result.stderr
+    scores = json.loads(result.stdout)
+    assert scores["n_vehicles"] == 22 and scores["n_non_vehicles"] == 23
+    assert scores["accuracy"] > 0.9
+
+
+def test_corrupt_model_is_refused(test_video: Path, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    result = run_cli("evaluate-classifier", "--data", tmp_path, "--model", bad)
+    assert_one_line_error(result, "corrupt")

@@ -1,0 +1,162 @@
+"""The vehicle classifier: standardised features, linear SVM weights, Platt calibration.
+
+Saved without pickle: an .npz of plain arrays plus a JSON header (format version, feature config,
+training report, library versions). Loading checks the version and every shape.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import platform
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vehicles.features import FeatureConfig
+
+FORMAT = "roadview-vehicle-model"
+FORMAT_VERSION = 1
+ARRAYS = ("weights", "mean", "scale", "scalars")
+
+
+class ModelError(Exception):
+    """A model file is missing, corrupt, or of another version; the message says what to do."""
+
+
+def default_model_path() -> Path:
+    """The committed model that `roadview process` uses unless told otherwise."""
+    return Path(__file__).with_name("models") / "default.npz"
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleModel:
+    """Linear classifier on standardised patch features with calibrated probabilities."""
+
+    config: FeatureConfig
+    weights: NDArray[np.float64]  # on standardised features
+    intercept: float
+    mean: NDArray[np.float64]
+    scale: NDArray[np.float64]
+    platt_a: float  # P(vehicle) = 1 / (1 + exp(platt_a * decision + platt_b))
+    platt_b: float
+    report: dict[str, Any] = field(default_factory=dict)
+
+    def decision_function(self, features: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
+        """Signed distance to the SVM hyperplane for each row of raw features."""
+        w, b = self.folded()
+        return np.asarray(features, dtype=np.float64) @ w + b
+
+    def folded(self) -> tuple[NDArray[np.float64], float]:
+        """Weights and intercept that apply to raw (unstandardised) features directly."""
+        w = self.weights / self.scale
+        return w, float(self.intercept - w @ self.mean)
+
+    def probability(self, decision: NDArray[np.float64] | float) -> NDArray[np.float64]:
+        """Calibrated probability of a vehicle for decision values."""
+        z = np.clip(self.platt_a * np.asarray(decision, dtype=np.float64) + self.platt_b, -50, 50)
+        return np.asarray(1.0 / (1.0 + np.exp(z)))
+
+    def predict_proba(self, features: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
+        """Calibrated probability of a vehicle for each row of raw features."""
+        return self.probability(self.decision_function(features))
+
+    def predict(self, features: NDArray[np.floating[Any]]) -> NDArray[np.int8]:
+        """1 for vehicle, 0 otherwise (decision value above zero)."""
+        return (self.decision_function(features) > 0).astype(np.int8)
+
+
+def _versions() -> dict[str, str]:
+    import cv2
+    import sklearn
+
+    return {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "opencv": cv2.__version__,
+        "scikit-learn": sklearn.__version__,
+    }
+
+
+def save_model(model: VehicleModel, path: Path) -> None:
+    """Write the model as .npz of arrays plus a JSON header, atomically."""
+    header = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "feature_config": model.config.to_dict(),
+        "feature_length": model.config.length,
+        "intercept": model.intercept,
+        "platt_a": model.platt_a,
+        "platt_b": model.platt_b,
+        "report": model.report,
+        "versions": _versions(),
+    }
+    arrays = {
+        "weights": model.weights.astype(np.float64),
+        "mean": model.mean.astype(np.float64),
+        "scale": model.scale.astype(np.float64),
+        "scalars": np.array([model.intercept, model.platt_a, model.platt_b]),
+        "header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.npz", dir=path.parent)
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def load_model(path: Path) -> VehicleModel:
+    """Read a model file, checking format, version and shapes; never unpickles."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"model file {path} does not exist; run 'make train' or pass --model")
+    fix = "retrain with 'make train' or pass another --model"
+    try:
+        with np.load(io.BytesIO(path.read_bytes()), allow_pickle=False) as npz:
+            arrays = {name: np.asarray(npz[name]) for name in (*ARRAYS, "header")}
+        header = json.loads(arrays["header"].tobytes().decode())
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError):
+        raise ModelError(f"model file {path} is corrupt or not a roadview model; {fix}") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise ModelError(f"{path} is not a roadview vehicle model; {fix}")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise ModelError(
+            f"model {path} has format version {header.get('format_version')}, this roadview "
+            f"reads {FORMAT_VERSION}; {fix}"
+        )
+    try:
+        config = FeatureConfig(**header["feature_config"])
+    except (TypeError, ValueError, KeyError):
+        raise ModelError(f"model {path} has an invalid feature config; {fix}") from None
+    n = config.length
+    for name in ("weights", "mean", "scale"):
+        if arrays[name].shape != (n,):
+            raise ModelError(
+                f"model {path}: {name} has shape {arrays[name].shape}, expected "
+                f"({n},) for its feature config; {fix}"
+            )
+    if arrays["scalars"].shape != (3,) or not np.all(np.isfinite(arrays["weights"])):
+        raise ModelError(f"model {path} has invalid values; {fix}")
+    if np.any(arrays["scale"] <= 0):
+        raise ModelError(f"model {path} has non-positive feature scales; {fix}")
+    intercept, platt_a, platt_b = (float(v) for v in arrays["scalars"])
+    return VehicleModel(
+        config=config,
+        weights=arrays["weights"],
+        intercept=intercept,
+        mean=arrays["mean"],
+        scale=arrays["scale"],
+        platt_a=platt_a,
+        platt_b=platt_b,
+        report=dict(header.get("report") or {}),
+    )
