@@ -112,8 +112,14 @@ def process_command(
     ] = str(default_calibration_path()),
     start: Annotated[float, typer.Option(help="Start time in seconds.")] = 0.0,
     end: Annotated[float | None, typer.Option(help="End time in seconds.")] = None,
+    lanes: Annotated[bool, typer.Option("--lanes/--no-lanes", help="Find the ego lane.")] = True,
+    vehicles: Annotated[
+        bool, typer.Option("--vehicles/--no-vehicles", help="Detect and track vehicles.")
+    ] = True,
+    model: Annotated[Path | None, typer.Option(help="Vehicle model file [shipped].")] = None,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
+    from app.assembly import build_stages
     from app.pipeline import Pipeline, process_still, process_video
     from app.video import is_image
 
@@ -121,7 +127,7 @@ def process_command(
     output = output if output is not None else default_output(source)
     if output.resolve() == source.resolve():
         raise InputError("output would overwrite the input; choose another -o")
-    pipeline = Pipeline(cal, stages=[])
+    pipeline = Pipeline(cal, stages=build_stages(lanes, vehicles, model))
     if is_image(source):
         summary = process_still(source, output, pipeline, record)
     else:

@@ -1,0 +1,25 @@
+"""Builds the stage list that `process` and `debug` run, from the user's switches."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from app.stages import FrameStage
+
+
+def build_stages(
+    lanes: bool = True, vehicles: bool = True, model: Path | None = None, keep_debug: bool = False
+) -> list[FrameStage]:
+    """The lane and vehicle stages that are switched on, in pipeline order."""
+    stages: list[FrameStage] = []
+    if lanes:
+        from lanes.finder import LaneFinder
+
+        stages.append(LaneFinder(keep_debug=keep_debug))
+    if vehicles:
+        from vehicles.detector import VehicleDetector
+        from vehicles.model import default_model_path, load_model
+
+        classifier = load_model(model if model is not None else default_model_path())
+        stages.append(VehicleDetector(classifier, keep_debug=keep_debug))
+    return stages

@@ -1,0 +1,51 @@
+"""Every parameter of the lane finder, as fractions of the frame where they depend on its size."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class LaneConfig:
+    """Lane finder settings; defaults fit the shared dashcam at any resolution of its aspect."""
+
+    # Source trapezoid on the undistorted frame (fractions of width/height), measured on
+    # straight_lines1/2: the ego lane's lines pass through these points.
+    src_top_y: float = 0.635
+    src_bottom_y: float = 0.95
+    src_top_left_x: float = 0.4586
+    src_top_right_x: float = 0.5438
+    src_bottom_left_x: float = 0.2047
+    src_bottom_right_x: float = 0.8203
+    # Bird's-eye image: size as fractions of the frame, lane lines mapped to these columns.
+    warp_width: float = 0.625
+    warp_height: float = 0.5
+    dst_left_x: float = 0.3
+    dst_right_x: float = 0.7
+    # World scale: a US lane is 3.7 m wide; dashes are 3 m long (sets metres per warped row).
+    lane_width_m: float = 3.7
+    warp_length_m: float = 27.0  # road length covered by the trapezoid, from the 3 m dashes
+    # Thresholds on the bird's-eye image (LAB channels, 0..255).
+    line_width_m: float = 0.15
+    white_tophat: float = 18.0
+    white_min_l: float = 120.0
+    yellow_tophat: float = 7.0
+    yellow_min_b: float = 140.0
+    min_paint_rows: int = 7  # paint is kept where it runs at least this many bird's-eye rows
+    # Search.
+    windows: int = 9
+    window_margin_m: float = 0.55
+    prior_margin_m: float = 0.45
+    min_window_pixels: int = 30
+    min_line_pixels: int = 150
+    width_change_prior: float = 5.0  # weight pulling the lane's width change to the last one
+    outlier_m: float = 0.25  # pixels farther than this from a first fit are dropped, then refit
+    # History and sanity checks.
+    history: int = 3
+    max_misses: int = 6
+    min_lane_width_m: float = 2.6
+    max_lane_width_m: float = 5.6
+    max_width_change_m: float = 1.8  # top vs bottom width: near parallel (pitch changes it)
+    max_jump_m: float = 0.5  # x change of a line vs its smoothed fit: continuity
+    straight_radius_m: float = 10_000.0  # report at most this radius
+    polyline_points: int = 24

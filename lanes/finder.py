@@ -1,0 +1,224 @@
+"""The lane stage: mask, bird's-eye search, `Line` histories, checks, measurements, record."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lanes.config import LaneConfig
+from lanes.line import Line
+from lanes.measure import lane_offset, lane_widths, radius_of_curvature
+from lanes.perspective import BirdsEye, birdseye_for
+from lanes.search import (
+    Fit,
+    LinePixels,
+    evaluate_fit,
+    fit_lane,
+    fit_line,
+    histogram_bases,
+    prior_search,
+    window_search,
+)
+from lanes.threshold import lane_mask
+
+
+@dataclass(frozen=True, eq=False)
+class LaneEstimate:
+    """The ego lane in one frame: boundaries in undistorted-frame pixels and measurements."""
+
+    left: NDArray[np.float64]  # (n, 2) x, y from the frame bottom up to the search region top
+    right: NDArray[np.float64]
+    curvature_m: float
+    offset_m: float
+    left_fit: Fit  # bird's-eye fits, x = a y^2 + b y + c
+    right_fit: Fit
+
+    def to_record(self) -> dict[str, Any]:
+        """JSON-ready record form."""
+        return {
+            "left": np.round(self.left, 1).tolist(),
+            "right": np.round(self.right, 1).tolist(),
+            "curvature_m": round(self.curvature_m, 1),
+            "offset_m": round(self.offset_m, 3),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class LaneDebug:
+    """Intermediates of one frame for the debug mode."""
+
+    birdseye: NDArray[np.uint8]
+    mask: NDArray[np.uint8]
+    left_pixels: LinePixels
+    right_pixels: LinePixels
+    status: tuple[str, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class LaneResult:
+    """What the lane stage found in a frame (lane None when there is none yet)."""
+
+    lane: LaneEstimate | None
+    debug: LaneDebug | None = None
+    status: tuple[str, ...] = field(default_factory=tuple)
+
+    def to_record(self) -> dict[str, Any] | None:
+        """The record's `lane` value."""
+        return self.lane.to_record() if self.lane is not None else None
+
+
+class LaneFinder:
+    """Finds the ego lane in every frame, keeping a `Line` history per side."""
+
+    record_key = "lane"
+
+    def __init__(self, config: LaneConfig | None = None, keep_debug: bool = False) -> None:
+        self.config = config if config is not None else LaneConfig()
+        self.keep_debug = keep_debug
+        self.left = Line(self.config.history, self.config.max_misses)
+        self.right = Line(self.config.history, self.config.max_misses)
+        self._view: BirdsEye | None = None
+
+    def reset(self) -> None:
+        """Forget both lines' history."""
+        self.left.reset()
+        self.right.reset()
+
+    def view(self, frame_size: tuple[int, int]) -> BirdsEye:
+        """The bird's-eye warp for this frame size (built once per size)."""
+        if self._view is None or self._view.frame_size != frame_size:
+            self._view = birdseye_for(frame_size, self.config)
+        return self._view
+
+    def process(self, frame: NDArray[np.uint8]) -> LaneResult:
+        """Find the lane in one undistorted RGB frame and update the history."""
+        cfg = self.config
+        view = self.view((frame.shape[1], frame.shape[0]))
+        bw, bh = view.size
+        birdseye = view.warp(frame)
+        mask = lane_mask(birdseye, cfg, view.xm_per_px)
+        hints = (cfg.dst_left_x * bw, cfg.dst_right_x * bw)
+        pixels = [
+            self._find(mask, line, hint, view)
+            for line, hint in zip((self.left, self.right), hints, strict=True)
+        ]
+        enough = [len(p) >= cfg.min_line_pixels for p in pixels]
+        fits: list[Fit | None]
+        if all(enough):
+            previous = (self.left.smoothed, self.right.smoothed)
+            # A dash gap near the camera leaves the width change loose: hold it to the last one.
+            near_gap = min(int((p.y > 2 * bh / 3).sum()) for p in pixels) < cfg.min_window_pixels
+            spread = (
+                None
+                if not near_gap or previous[0] is None or previous[1] is None
+                else float(previous[1][1] - previous[0][1])
+            )
+            fits = list(
+                fit_lane(
+                    pixels[0],
+                    pixels[1],
+                    bh,
+                    cfg.outlier_m / view.xm_per_px,
+                    spread,
+                    cfg.width_change_prior,
+                )
+            )
+        else:
+            fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
+        status = self._check_and_update(fits, pixels, view)
+        lane = self._estimate(view)
+        debug = LaneDebug(birdseye, mask, pixels[0], pixels[1], status) if self.keep_debug else None
+        return LaneResult(lane, debug, status)
+
+    def _find(self, mask: NDArray[np.uint8], line: Line, hint: float, view: BirdsEye) -> LinePixels:
+        cfg = self.config
+        bh = view.size[1]
+        prior = line.smoothed
+        if line.trusted and prior is not None:
+            found = prior_search(mask, prior, int(cfg.prior_margin_m / view.xm_per_px))
+            if len(found) >= cfg.min_line_pixels:
+                return found
+        if prior is not None:
+            hint = float(evaluate_fit(prior, bh))
+        spread = 0.35 * (cfg.dst_right_x - cfg.dst_left_x) * view.size[0]
+        side_hint = histogram_bases(mask, hint, hint, spread)[0]
+        return window_search(
+            mask,
+            side_hint,
+            cfg.windows,
+            int(cfg.window_margin_m / view.xm_per_px),
+            cfg.min_window_pixels,
+        )
+
+    def _check_and_update(
+        self, fits: list[Fit | None], pixels: list[LinePixels], view: BirdsEye
+    ) -> tuple[str, ...]:
+        """Sanity checks; accept or reject each line's new fit. Returns notes of what failed."""
+        cfg = self.config
+        bh = view.size[1]
+        rows = np.array([0.0, bh / 2, float(bh)])
+        notes: list[str] = []
+        lines = (self.left, self.right)
+        ok = [f is not None for f in fits]
+        for i, (fit, line) in enumerate(zip(fits, lines, strict=True)):
+            if fit is None:
+                notes.append(f"{('left', 'right')[i]}: too few pixels ({len(pixels[i])})")
+                continue
+            prior = line.smoothed
+            if prior is not None:
+                jump = np.abs(evaluate_fit(fit, rows) - evaluate_fit(prior, rows)).max()
+                if jump * view.xm_per_px > cfg.max_jump_m * (1 + line.misses):
+                    ok[i] = False
+                    notes.append(f"{('left', 'right')[i]}: jumped {jump * view.xm_per_px:.2f} m")
+        if ok[0] and ok[1]:
+            assert fits[0] is not None and fits[1] is not None
+            widths = lane_widths(fits[0], fits[1], rows) * view.xm_per_px
+            bad_width = widths.min() < cfg.min_lane_width_m or widths.max() > cfg.max_lane_width_m
+            if bad_width or np.ptp(widths) > cfg.max_width_change_m:
+                notes.append(f"width {widths.min():.2f}-{widths.max():.2f} m")
+                # Keep the line backed by more paint; the other one is suspect.
+                ok[int(len(pixels[0]) > len(pixels[1]))] = False
+        for fit, line, good in zip(fits, lines, ok, strict=True):
+            if good and fit is not None:
+                line.accept(fit)
+            else:
+                line.reject()
+        return tuple(notes)
+
+    def _estimate(self, view: BirdsEye) -> LaneEstimate | None:
+        cfg = self.config
+        bw, bh = view.size
+        left, right = self.left.smoothed, self.right.smoothed
+        lane_px = (cfg.dst_right_x - cfg.dst_left_x) * bw
+        if left is None and right is None:
+            return None
+        # A side without history follows the other at the standard lane width.
+        if left is None:
+            assert right is not None
+            left = right - np.array([0.0, 0.0, lane_px])
+        if right is None:
+            right = left + np.array([0.0, 0.0, lane_px])
+        w, h = view.frame_size
+        frame_rows = np.linspace(h - 1, cfg.src_top_y * h, cfg.polyline_points)
+        bird_rows = view.to_birdseye(np.stack([np.full_like(frame_rows, w / 2), frame_rows], 1))[
+            :, 1
+        ]
+        polylines = []
+        for fit in (left, right):
+            pts = np.stack([evaluate_fit(fit, bird_rows), bird_rows], axis=1)
+            polylines.append(view.to_frame(pts))
+        radii = [
+            radius_of_curvature(f, bh, view.xm_per_px, view.ym_per_px, cfg.straight_radius_m)
+            for f in (left, right)
+        ]
+        # The mean of curvatures (not radii) so one near-straight line does not dominate.
+        curvature = float(np.mean([1.0 / r for r in radii]))
+        radius = (
+            min(cfg.straight_radius_m, 1.0 / curvature) if curvature > 0 else cfg.straight_radius_m
+        )
+        centre_px = float(view.to_birdseye(np.array([[w / 2, cfg.src_bottom_y * h]]))[0, 0])
+        offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
+        return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right)

@@ -1,0 +1,36 @@
+"""Radius of curvature and the vehicle's offset from the lane centre, in metres."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lanes.search import Fit, evaluate_fit
+
+
+def radius_of_curvature(
+    fit: Fit, y_px: float, xm_per_px: float, ym_per_px: float, cap_m: float
+) -> float:
+    """Radius in metres of x(y) at row y_px (fit rescaled to metres); capped for straights."""
+    a = fit[0] * xm_per_px / ym_per_px**2
+    b = fit[1] * xm_per_px / ym_per_px
+    y = y_px * ym_per_px
+    curvature = abs(2 * a) / (1 + (2 * a * y + b) ** 2) ** 1.5
+    return float(min(cap_m, 1.0 / curvature)) if curvature > 0 else cap_m
+
+
+def signed_radius(fit: Fit, y_px: float, xm_per_px: float, ym_per_px: float, cap_m: float) -> float:
+    """Radius with a sign: negative when the road bends left, positive when it bends right."""
+    r = radius_of_curvature(fit, y_px, xm_per_px, ym_per_px, cap_m)
+    # In the bird's-eye view y grows towards the camera: a > 0 means x shrinks ahead (bends left).
+    return -r if fit[0] > 0 else r
+
+
+def lane_offset(left: Fit, right: Fit, y_px: float, centre_px: float, xm_per_px: float) -> float:
+    """Camera position minus lane centre in metres: positive when the car is right of centre."""
+    middle = (evaluate_fit(left, y_px) + evaluate_fit(right, y_px)) / 2
+    return float((centre_px - middle) * xm_per_px)
+
+
+def lane_widths(left: Fit, right: Fit, rows: np.ndarray) -> np.ndarray:
+    """Right minus left x at the given rows, in bird's-eye pixels."""
+    return evaluate_fit(right, rows) - evaluate_fit(left, rows)

@@ -1,0 +1,128 @@
+"""Finding each line's pixels in the bird's-eye mask: sliding windows or a margin around a prior."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+Fit = NDArray[np.float64]  # x = a y^2 + b y + c in bird's-eye pixels
+
+
+@dataclass(frozen=True, eq=False)
+class LinePixels:
+    """Pixels attributed to one line, and the search windows used (x1, y1, x2, y2)."""
+
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    windows: tuple[tuple[int, int, int, int], ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+
+def fit_line(pixels: LinePixels, weight_near: bool = True) -> Fit | None:
+    """Second-order fit x(y); near rows weigh more since they are sharper. None if too few."""
+    if len(pixels) < 3 or np.ptp(pixels.y) < 10:
+        return None
+    weights = None
+    if weight_near:
+        weights = 0.5 + pixels.y / max(float(pixels.y.max()), 1.0)
+    return np.polyfit(pixels.y, pixels.x, 2, w=weights)
+
+
+def evaluate_fit(fit: Fit, y: NDArray[Any] | float) -> NDArray[np.float64]:
+    """x of a fit at rows y."""
+    return np.asarray(np.polyval(fit, y), dtype=np.float64)
+
+
+def histogram_bases(
+    mask: NDArray[np.uint8], left_hint: float, right_hint: float, spread: float
+) -> tuple[float, float]:
+    """Columns of the strongest paint in the lower half, near where each line is expected."""
+    h, w = mask.shape
+    column_sum = mask[h // 2 :].sum(axis=0).astype(np.float64)
+    xs = np.arange(w)
+    bases = []
+    for hint in (left_hint, right_hint):
+        # Prefer peaks near the expected column: weight falls off over `spread` pixels.
+        weighted = column_sum * np.exp(-(((xs - hint) / spread) ** 2))
+        bases.append(float(np.argmax(weighted)) if weighted.max() > 0 else hint)
+    return bases[0], bases[1]
+
+
+def window_search(
+    mask: NDArray[np.uint8], base_x: float, windows: int, margin: int, min_pixels: int
+) -> LinePixels:
+    """Follow one line upwards in stacked windows, re-centring where enough pixels are found."""
+    h = mask.shape[0]
+    ys, xs = np.nonzero(mask)
+    height = h // windows
+    centre = base_x
+    step = 0.0
+    chosen: list[NDArray[np.intp]] = []
+    boxes = []
+    for i in range(windows):
+        y2 = h - i * height
+        y1 = y2 - height
+        x1, x2 = int(centre - margin), int(centre + margin)
+        boxes.append((x1, y1, x2, y2))
+        inside = np.flatnonzero((ys >= y1) & (ys < y2) & (xs >= x1) & (xs < x2))
+        chosen.append(inside)
+        if len(inside) >= min_pixels:
+            new_centre = float(xs[inside].mean())
+            step = new_centre - centre if i else 0.0
+            centre = new_centre
+        centre += step * 0.5  # follow a curve through gaps in dashed lines
+    index = np.concatenate(chosen) if chosen else np.zeros(0, np.intp)
+    return LinePixels(xs[index].astype(np.float64), ys[index].astype(np.float64), tuple(boxes))
+
+
+def prior_search(mask: NDArray[np.uint8], prior: Fit, margin: int) -> LinePixels:
+    """Pixels within `margin` of a previous fit."""
+    ys, xs = np.nonzero(mask)
+    inside = np.abs(xs - evaluate_fit(prior, ys)) < margin
+    return LinePixels(xs[inside].astype(np.float64), ys[inside].astype(np.float64))
+
+
+def fit_lane(
+    left: LinePixels,
+    right: LinePixels,
+    rows: float,
+    outlier_px: float,
+    prior_spread: float | None = None,
+    prior_weight: float = 0.0,
+) -> tuple[Fit, Fit]:
+    """Fit both lines at once: shared curvature and heading, own position, a linear width change.
+
+    left:  x = a y^2 + (b - e/2) y + (c - d/2);  right: x = a y^2 + (b + e/2) y + (c + d/2).
+    Lane lines are parallel on the road, so a solid line steadies the fit of a dashed one. Each
+    side weighs the same in total (near rows more), and one pass drops outlying pixels.
+    """
+    ys = np.concatenate([left.y, right.y])
+    xs = np.concatenate([left.x, right.x])
+    side = np.concatenate([np.full(len(left), -0.5), np.full(len(right), 0.5)])
+    weights = np.concatenate(
+        [np.full(len(left), 1.0 / max(len(left), 1)), np.full(len(right), 1.0 / max(len(right), 1))]
+    )
+    weights *= 0.5 + ys / rows
+    design = np.stack([ys**2, ys, np.ones_like(ys), side, side * ys], axis=1)
+    keep = np.ones(len(ys), bool)
+    params = np.zeros(5)
+    # A pseudo-observation rows * (e - e_prior) = 0 pulls the width change towards the prior.
+    prior_row = np.array([[0.0, 0.0, 0.0, 0.0, rows]]) * np.sqrt(prior_weight)
+    prior_target = np.array([rows * (prior_spread or 0.0)]) * np.sqrt(prior_weight)
+    use_prior = prior_spread is not None and prior_weight > 0
+    for _ in range(2):
+        sw = np.sqrt(weights[keep])
+        a_mat, b_vec = design[keep] * sw[:, None], xs[keep] * sw
+        if use_prior:
+            a_mat, b_vec = np.vstack([a_mat, prior_row]), np.concatenate([b_vec, prior_target])
+        params = np.linalg.lstsq(a_mat, b_vec, rcond=None)[0]
+        keep = np.abs(design @ params - xs) < outlier_px
+        if keep.sum() < 10:
+            break
+    a, b, c, d, e = params
+    return np.array([a, b - e / 2, c - d / 2]), np.array([a, b + e / 2, c + d / 2])

@@ -1,0 +1,48 @@
+"""Every parameter of the vehicle detector; sizes are fractions of the frame so any size works."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Band:
+    """A horizontal band searched with one square window size (fractions of frame height/width)."""
+
+    window: float  # window side / frame height
+    top: float  # band top / frame height
+    bottom: float  # band bottom / frame height
+    left: float = 0.0  # band left / frame width
+    right: float = 1.0
+    step_cells: int = 1  # window step in HOG cells
+
+
+def _default_bands() -> tuple[Band, ...]:
+    # At 1280x720: 48, 64, 96, 128 and 192 px windows; small ones near the horizon (y ~ 420).
+    return (
+        Band(window=48 / 720, top=396 / 720, bottom=472 / 720, left=0.1, right=0.9),
+        Band(window=64 / 720, top=392 / 720, bottom=496 / 720),
+        Band(window=96 / 720, top=388 / 720, bottom=548 / 720),
+        Band(window=128 / 720, top=384 / 720, bottom=592 / 720),
+        Band(window=192 / 720, top=380 / 720, bottom=668 / 720, step_cells=2),
+    )
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Search bands, heat, and tracking settings (defaults for 25 fps)."""
+
+    bands: tuple[Band, ...] = field(default_factory=_default_bands)
+    min_probability: float = 0.8  # a window adds heat when the calibrated P(vehicle) is above
+    heat_scale: int = 4  # the heat map is kept at 1/heat_scale of the frame size
+    heat_history: int = 8  # frames combined by the Heatmap
+    heat_threshold: float = 2.5  # mean heat per frame over the history a pixel must exceed
+    peak_fraction: float = 0.35  # a region's box keeps heat above this fraction of its peak
+    split_valley: float = 0.6  # two peaks split a region when the valley is below this x peak
+    min_box: float = 0.045  # smallest box side reported / frame height
+    # Tracking.
+    match_iou: float = 0.2
+    smoothing: float = 0.5  # weight of the new box in the smoothed box
+    confirm_frames: int = 4  # a track is shown once seen in this many frames
+    max_missed: int = 8  # a track is dropped after this many frames unseen
+    show_missed: int = 4  # a confirmed track stays shown through this many missed frames

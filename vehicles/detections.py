@@ -1,0 +1,45 @@
+"""`Detections`: the value passed between the detector's stages (boxes, scores, track ids)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True, eq=False)
+class Detections:
+    """Boxes [x1, y1, x2, y2] in frame pixels, a score per box, and track ids (-1: none yet)."""
+
+    boxes: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 4)))
+    scores: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    ids: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    def __post_init__(self) -> None:
+        if self.boxes.shape != (len(self.scores), 4) or len(self.ids) != len(self.scores):
+            raise ValueError("boxes, scores and ids must describe the same detections")
+
+    @classmethod
+    def from_boxes(
+        cls,
+        boxes: NDArray[np.floating[Any]],
+        scores: NDArray[np.floating[Any]],
+        ids: NDArray[np.integer[Any]] | None = None,
+    ) -> Detections:
+        """Detections from array-likes (ids default to -1)."""
+        b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        s = np.asarray(scores, dtype=np.float64).reshape(-1)
+        i = np.full(len(s), -1, np.int64) if ids is None else np.asarray(ids, np.int64)
+        return cls(b, s, i)
+
+    def __len__(self) -> int:
+        return len(self.scores)
+
+    def to_record(self) -> list[dict[str, Any]]:
+        """JSON-ready list: id, box (rounded pixels) and score of each detection."""
+        return [
+            {"id": int(i), "box": [round(float(v), 1) for v in box], "score": round(float(s), 3)}
+            for box, s, i in zip(self.boxes, self.scores, self.ids, strict=True)
+        ]

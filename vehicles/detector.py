@@ -1,0 +1,114 @@
+"""The vehicle stage: dense multi-scale search, Heatmap history, tracking; one call per frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vehicles.config import DetectorConfig
+from vehicles.detections import Detections
+from vehicles.heatmap import Heatmap
+from vehicles.model import VehicleModel
+from vehicles.search import BandHits, LinearWeights, search_band
+from vehicles.tracker import Tracker
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleDebug:
+    """Intermediates of one frame for the debug mode."""
+
+    hits: tuple[BandHits, ...]
+    frame_heat: NDArray[np.float32]
+    history_heat: NDArray[np.float32]
+    regions: Detections
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleResult:
+    """Shown vehicles of one frame (tracked), and optionally the intermediates."""
+
+    detections: Detections
+    debug: VehicleDebug | None = field(default=None)
+
+    def to_record(self) -> list[dict[str, Any]]:
+        """The record's `vehicles` value."""
+        return self.detections.to_record()
+
+
+class VehicleDetector:
+    """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
+
+    Bands are split into two alternating sets so each frame searches about half of them; the heat
+    history spans several frames, so every scale still contributes to every decision.
+    """
+
+    record_key = "vehicles"
+
+    def __init__(
+        self,
+        model: VehicleModel,
+        config: DetectorConfig | None = None,
+        keep_debug: bool = False,
+        interleave: bool = True,
+    ) -> None:
+        self.model = model
+        self.config = config if config is not None else DetectorConfig()
+        self.weights = LinearWeights.from_model(model)
+        self.keep_debug = keep_debug
+        self.interleave = interleave
+        cfg = self.config
+        self.heatmap = Heatmap(cfg.heat_history, cfg.heat_threshold, cfg.heat_scale)
+        self.tracker = Tracker(
+            cfg.match_iou, cfg.smoothing, cfg.confirm_frames, cfg.max_missed, cfg.show_missed
+        )
+        self.frame_index = 0
+
+    def reset(self) -> None:
+        """Forget heat and tracks."""
+        self.heatmap.reset()
+        self.tracker.reset()
+        self.frame_index = 0
+
+    def search(self, frame: NDArray[np.uint8], parity: int | None = None) -> tuple[BandHits, ...]:
+        """Window scores of the bands searched this frame (all bands when parity is None)."""
+        bands = self.config.bands
+        if parity is not None:
+            bands = bands[parity::2]
+        return tuple(search_band(frame, band, self.weights) for band in bands)
+
+    def process(self, frame: NDArray[np.uint8]) -> VehicleResult:
+        """Detect, accumulate heat, label regions, and track for one undistorted RGB frame."""
+        cfg = self.config
+        h, w = frame.shape[:2]
+        parity = self.frame_index % 2 if self.interleave else None
+        self.frame_index += 1
+        hits = self.search(frame, parity)
+        boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
+        proba = (
+            self.model.probability(np.concatenate([hit.decisions for hit in hits]))
+            if hits
+            else np.zeros(0)
+        )
+        strong = proba >= cfg.min_probability
+        # Interleaved frames search half the bands: double their weight to keep heat comparable.
+        weight = (2.0 if parity is not None else 1.0) * proba[strong]
+        frame_heat = self.heatmap.add((w, h), boxes[strong], weight)
+        region_boxes, peaks = self.heatmap.regions(cfg.peak_fraction, cfg.split_valley)
+        big = (
+            np.minimum(
+                region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
+            )
+            >= cfg.min_box * h
+        )
+        scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat_threshold, 1e-6))
+        regions = Detections.from_boxes(region_boxes[big], scores)
+        shown = self.tracker.update(regions)
+        debug = (
+            VehicleDebug(hits, frame_heat, self.heatmap.combined, regions)
+            if self.keep_debug
+            else None
+        )
+        return VehicleResult(shown, debug)

@@ -1,0 +1,117 @@
+"""`Heatmap`: window hits accumulated over recent frames, thresholded and labelled into boxes."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+
+def box_heat(
+    shape: tuple[int, int], boxes: NDArray[np.float64], weights: NDArray[np.float64], scale: int
+) -> NDArray[np.float32]:
+    """Sum of `weights` over each box, on a grid 1/scale of the frame (vectorised via corners)."""
+    h, w = shape
+    corners = np.zeros((h + 1, w + 1), np.float64)
+    if len(boxes):
+        b = np.round(boxes / scale).astype(np.intp)
+        x1, y1 = np.clip(b[:, 0], 0, w), np.clip(b[:, 1], 0, h)
+        x2, y2 = np.clip(b[:, 2], 0, w), np.clip(b[:, 3], 0, h)
+        np.add.at(corners, (y1, x1), weights)
+        np.add.at(corners, (y1, x2), -weights)
+        np.add.at(corners, (y2, x1), -weights)
+        np.add.at(corners, (y2, x2), weights)
+    return corners.cumsum(0).cumsum(1)[:h, :w].astype(np.float32)
+
+
+def split_peaks(
+    heat: NDArray[np.float32], region: NDArray[np.bool_], valley: float
+) -> list[NDArray[np.bool_]]:
+    """Split a region into one part per heat peak when the peaks are separated by a clear valley."""
+    local = heat * region
+    peaks = (local == ndimage.maximum_filter(local, size=5)) & region & (local > 0)
+    labels, n = ndimage.label(peaks)
+    if n < 2:
+        return [region]
+    centres = np.array(ndimage.center_of_mass(local, labels, range(1, n + 1)))
+    values = np.array(ndimage.maximum(local, labels, range(1, n + 1)))
+    order = np.argsort(values)[::-1]
+    keep = [order[0]]
+    for k in order[1:]:
+        # A second peak counts when the heat between it and every kept peak dips low enough.
+        ok = True
+        for j in keep:
+            line = np.linspace(centres[k], centres[j], 20).round().astype(int)
+            dip = local[line[:, 0], line[:, 1]].min()
+            if dip > valley * min(values[k], values[j]):
+                ok = False
+                break
+        if ok:
+            keep.append(k)
+    if len(keep) < 2:
+        return [region]
+    # Each pixel of the region goes to the nearest kept peak (vectorised distance).
+    ys, xs = np.nonzero(region)
+    d = (ys[:, None] - centres[keep, 0]) ** 2 + (xs[:, None] - centres[keep, 1]) ** 2
+    owner = np.argmin(d, axis=1)
+    parts = []
+    for i in range(len(keep)):
+        part = np.zeros_like(region)
+        part[ys[owner == i], xs[owner == i]] = True
+        parts.append(part)
+    return parts
+
+
+class Heatmap:
+    """The last `history` frames of heat; their mean is thresholded and labelled into regions."""
+
+    def __init__(self, history: int, threshold: float, scale: int) -> None:
+        self.frames: deque[NDArray[np.float32]] = deque(maxlen=history)
+        self.threshold = threshold
+        self.scale = scale
+
+    def reset(self) -> None:
+        """Forget all frames."""
+        self.frames.clear()
+
+    def add(
+        self, frame_size: tuple[int, int], boxes: NDArray[np.float64], weights: NDArray[np.float64]
+    ) -> NDArray[np.float32]:
+        """Add one frame's weighted boxes; returns this frame's heat."""
+        w, h = frame_size
+        shape = (-(-h // self.scale), -(-w // self.scale))
+        if self.frames and self.frames[-1].shape != shape:
+            self.frames.clear()
+        heat = box_heat(shape, boxes, weights, self.scale)
+        self.frames.append(heat)
+        return heat
+
+    @property
+    def combined(self) -> NDArray[np.float32]:
+        """Mean heat per frame over the history (filled up to `history` frames)."""
+        if not self.frames:
+            return np.zeros((1, 1), np.float32)
+        total = np.sum(np.stack(list(self.frames)), axis=0)
+        return np.asarray(total / (self.frames.maxlen or 1), dtype=np.float32)
+
+    def regions(
+        self, peak_fraction: float, valley: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Boxes (frame pixels) and peak heat of the thresholded, labelled, split regions."""
+        heat = self.combined
+        labels, n = ndimage.label(heat > self.threshold)
+        boxes, peaks = [], []
+        for index in range(1, n + 1):
+            region = labels == index
+            for part in split_peaks(heat, region, valley):
+                peak = float(heat[part].max())
+                # The box covers the part's heat above a fraction of its peak: tighter than the
+                # union of square windows.
+                core = part & (heat >= max(self.threshold, peak_fraction * peak))
+                ys, xs = np.nonzero(core)
+                boxes.append([xs.min(), ys.min(), xs.max() + 1, ys.max() + 1])
+                peaks.append(peak)
+        out = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) * self.scale
+        return out, np.asarray(peaks, dtype=np.float64)

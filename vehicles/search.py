@@ -1,0 +1,129 @@
+"""Dense multi-scale window search: a linear model scored at every window position at once.
+
+A linear SVM's score is a dot product of its weights with the window's features. Every feature is
+read from per-cell maps of the band, so the score of all windows is a correlation of the weights
+with those maps: one matrix product per feature part and a few shifted sums, no loop over windows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from vehicles.config import Band
+from vehicles.features import FeatureConfig, FeatureMaps, feature_maps
+from vehicles.model import VehicleModel
+
+
+@dataclass(frozen=True, eq=False)
+class LinearWeights:
+    """A model's raw-feature weights split by feature part, shaped like the feature maps."""
+
+    hog: NDArray[np.float32]  # (blocks * blocks, block_length)
+    spatial: NDArray[np.float32]  # (size * size, 3)
+    hist: NDArray[np.float32]  # (3 * bins,)
+    bias: float
+    config: FeatureConfig
+
+    @classmethod
+    def from_model(cls, model: VehicleModel) -> LinearWeights:
+        """Fold the standardisation into the weights and split them."""
+        cfg = model.config
+        w, b = model.folded()
+        n_hog, n_spatial, _ = cfg.lengths
+        return cls(
+            hog=w[:n_hog].reshape(cfg.blocks_per_patch**2, cfg.block_length).astype(np.float32),
+            spatial=w[n_hog : n_hog + n_spatial].reshape(cfg.spatial_size**2, 3).astype(np.float32),
+            hist=w[n_hog + n_spatial :].astype(np.float32),
+            bias=b,
+            config=cfg,
+        )
+
+
+def score_windows(maps: FeatureMaps, weights: LinearWeights) -> NDArray[np.float64]:
+    """Decision value of every cell-aligned window: (cells_y - n + 1, cells_x - n + 1)."""
+    cfg = weights.config
+    nb, nc = cfg.blocks_per_patch, cfg.cells_per_patch
+    by, bx, length = maps.blocks.shape
+    ny, nx = by - nb + 1, bx - nb + 1
+    if ny <= 0 or nx <= 0:
+        return np.zeros((0, 0))
+    # HOG: each block position's dot product with each in-window block's weights.
+    per_block = (maps.blocks.reshape(-1, length) @ weights.hog.T).reshape(by, bx, nb * nb)
+    score = np.zeros((ny, nx), np.float64)
+    for i in range(nb):
+        for j in range(nb):
+            score += per_block[i : i + ny, j : j + nx, i * nb + j]
+    # Spatial: the same at the binned resolution, stepping s bins per cell.
+    s, ss = cfg.pixels_per_cell // cfg.spatial_factor, cfg.spatial_size
+    hs, ws, _ = maps.spatial.shape
+    per_bin = (maps.spatial.reshape(-1, 3) @ weights.spatial.T).reshape(hs, ws, ss * ss)
+    for u in range(ss):
+        for v in range(ss):
+            score += per_bin[u : u + s * (ny - 1) + 1 : s, v : v + s * (nx - 1) + 1 : s, u * ss + v]
+    # Histograms: one weight vector for every cell of the window, so a box sum of per-cell scores.
+    per_cell = maps.histograms @ weights.hist
+    integral = np.pad(per_cell, ((1, 0), (1, 0))).cumsum(0).cumsum(1)
+    score += (
+        integral[nc:, nc:] - integral[:-nc, nc:] - integral[nc:, :-nc] + integral[:-nc, :-nc]
+    )[:ny, :nx]
+    return score + weights.bias
+
+
+@dataclass(frozen=True, eq=False)
+class BandHits:
+    """Every window of one band: boxes in frame pixels and decision values."""
+
+    band: Band
+    window_px: float
+    boxes: NDArray[np.float64]  # (n, 4)
+    decisions: NDArray[np.float64]  # (n,)
+
+
+def band_geometry(
+    band: Band, frame_size: tuple[int, int], patch: int, cell: int
+) -> tuple[int, int, int, int, float]:
+    """(x0, y0, x1, y1) of the band in the frame and its scale (window px / patch px)."""
+    w, h = frame_size
+    window = band.window * h
+    scale = window / patch
+    y0 = round(band.top * h)
+    y1 = max(round(band.bottom * h), y0 + round(window))
+    x0, x1 = round(band.left * w), round(band.right * w)
+    y1 = min(y1, h)
+    return x0, y0, x1, y1, scale
+
+
+def search_band(frame: NDArray[np.uint8], band: Band, weights: LinearWeights) -> BandHits:
+    """Score every window of one band (HOG computed once for the band at its scale)."""
+    cfg = weights.config
+    h, w = frame.shape[:2]
+    x0, y0, x1, y1, scale = band_geometry(band, (w, h), cfg.patch_size, cfg.pixels_per_cell)
+    crop = frame[y0:y1, x0:x1]
+    size = (
+        max(cfg.patch_size, round((x1 - x0) / scale)),
+        max(cfg.patch_size, round((y1 - y0) / scale)),
+    )
+    interpolation = cv2.INTER_AREA if scale > 1 else cv2.INTER_LINEAR
+    scaled = np.asarray(cv2.resize(crop, size, interpolation=interpolation))
+    maps = feature_maps(scaled, cfg)
+    decision = score_windows(maps, weights)
+    step = band.step_cells
+    decision = decision[::step, ::step]
+    cy, cx = np.mgrid[0 : decision.shape[0], 0 : decision.shape[1]] * step
+    # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
+    sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
+    px, py = cx.ravel() * cfg.pixels_per_cell, cy.ravel() * cfg.pixels_per_cell
+    boxes = np.stack(
+        [
+            x0 + px * sx,
+            y0 + py * sy,
+            x0 + (px + cfg.patch_size) * sx,
+            y0 + (py + cfg.patch_size) * sy,
+        ],
+        axis=1,
+    )
+    return BandHits(band, scale * cfg.patch_size, boxes, decision.ravel())
