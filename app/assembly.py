@@ -8,18 +8,29 @@ from app.stages import FrameStage
 
 
 def build_stages(
-    lanes: bool = True, vehicles: bool = True, model: Path | None = None, keep_debug: bool = False
+    lanes: bool = True,
+    vehicles: bool = True,
+    model: Path | None = None,
+    keep_debug: bool = False,
+    still: bool = False,
 ) -> list[FrameStage]:
-    """The lane and vehicle stages that are switched on, in pipeline order."""
+    """The lane and vehicle stages that are switched on, in pipeline order.
+
+    For a still there is no history: every band is searched and nothing waits for confirmation.
+    """
     stages: list[FrameStage] = []
     if lanes:
         from lanes.finder import LaneFinder
 
         stages.append(LaneFinder(keep_debug=keep_debug))
     if vehicles:
+        from vehicles.config import DetectorConfig
         from vehicles.detector import VehicleDetector
         from vehicles.model import default_model_path, load_model
 
         classifier = load_model(model if model is not None else default_model_path())
-        stages.append(VehicleDetector(classifier, keep_debug=keep_debug))
+        config = DetectorConfig().for_still() if still else DetectorConfig()
+        stages.append(
+            VehicleDetector(classifier, config, keep_debug=keep_debug, interleave=not still)
+        )
     return stages

@@ -5,12 +5,15 @@ from __future__ import annotations
 import json
 import sys
 import traceback
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from app.errors import InputError
+from app.stages import StageResult
+from app.video import Frame
 from camera_cal import (
     CalibrationError,
     calibrate,
@@ -117,9 +120,11 @@ def process_command(
         bool, typer.Option("--vehicles/--no-vehicles", help="Detect and track vehicles.")
     ] = True,
     model: Annotated[Path | None, typer.Option(help="Vehicle model file [shipped].")] = None,
+    insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.assembly import build_stages
+    from app.compose import ComposeOptions, compose
     from app.pipeline import Pipeline, process_still, process_video
     from app.video import is_image
 
@@ -127,19 +132,51 @@ def process_command(
     output = output if output is not None else default_output(source)
     if output.resolve() == source.resolve():
         raise InputError("output would overwrite the input; choose another -o")
-    pipeline = Pipeline(cal, stages=build_stages(lanes, vehicles, model))
-    if is_image(source):
-        summary = process_still(source, output, pipeline, record)
+    still = is_image(source)
+    stages = build_stages(lanes, vehicles, model, keep_debug=insets, still=still)
+    pipeline = Pipeline(cal, stages=stages)
+    options = ComposeOptions(insets=insets)
+
+    def compositor(frame: Frame, results: Mapping[str, StageResult], fps: float) -> Frame:
+        return compose(frame, results, fps, options)
+
+    if still:
+        summary = process_still(source, output, pipeline, record, compositor)
     else:
         if is_image(output):
             raise InputError(
                 f"output {output} is an image name but the input is a video; use an .mp4 name"
             )
-        summary = process_video(source, output, pipeline, record, start_s=start, end_s=end)
+        summary = process_video(source, output, pipeline, record, compositor, start, end)
     typer.echo(
         f"wrote {summary.output} ({summary.frames} frames, {summary.fps:.1f} fps)"
         + (f" and {summary.record}" if summary.record else "")
     )
+
+
+@cli.command("debug")
+def debug_command(
+    source: Annotated[Path, typer.Argument(metavar="INPUT", help="Video to step through.")],
+    frames: Annotated[str, typer.Option(help="Frames A:B (B excluded) or one frame number.")],
+    out: Annotated[Path | None, typer.Option(help="Folder [NAME_debug next to the input].")] = None,
+    calibration: Annotated[
+        str, typer.Option(help="Calibration JSON, or 'none' to skip undistortion.")
+    ] = str(default_calibration_path()),
+    model: Annotated[Path | None, typer.Option(help="Vehicle model file [shipped].")] = None,
+) -> None:
+    """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
+    from app.assembly import build_stages
+    from app.debug import parse_frames, run_debug
+    from app.pipeline import Pipeline
+    from app.video import check_input
+
+    span = parse_frames(frames)
+    check_input(source)
+    cal = None if calibration.lower() == "none" else load_calibration(Path(calibration))
+    folder = out if out is not None else source.with_name(f"{source.stem}_debug")
+    pipeline = Pipeline(cal, build_stages(model=model, keep_debug=True))
+    written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
+    typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 
 
 @cli.command("evaluate")

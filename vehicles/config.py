@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 
 @dataclass(frozen=True)
@@ -46,3 +46,7 @@ class DetectorConfig:
     confirm_frames: int = 4  # a track is shown once seen in this many frames
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames
+
+    def for_still(self) -> DetectorConfig:
+        """The same search for a single image: no history to wait for or average over."""
+        return replace(self, heat_history=1, confirm_frames=1)

@@ -1,0 +1,193 @@
+"""The compositor: lane area and boundaries, vehicle boxes with ids, a heads-up panel, insets."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from app.stages import StageResult
+from lanes.finder import LaneEstimate, LaneResult
+from vehicles.detector import VehicleResult
+
+Frame = NDArray[np.uint8]
+LANE_FILL = (0, 200, 90)
+LANE_EDGE = (255, 230, 0)
+BOX = (255, 60, 60)
+TEXT = (255, 255, 255)
+PANEL = (20, 20, 20)
+
+
+@dataclass(frozen=True)
+class ComposeOptions:
+    """What the compositor draws."""
+
+    lane_alpha: float = 0.3
+    insets: bool = False
+
+
+def _scale(frame: Frame) -> float:
+    """Drawing scale: 1.0 at 720 rows, so text stays readable from 540 to 1080 rows."""
+    return frame.shape[0] / 720.0
+
+
+def draw_lane(frame: Frame, lane: LaneEstimate, alpha: float) -> None:
+    """A translucent filled lane between the boundaries, and the boundaries themselves."""
+    s = _scale(frame)
+    polygon = np.vstack([lane.left, lane.right[::-1]]).round().astype(np.int32)
+    x, y, w, h = cv2.boundingRect(polygon)
+    x, y = max(x, 0), max(y, 0)
+    w, h = min(w, frame.shape[1] - x), min(h, frame.shape[0] - y)
+    if w <= 0 or h <= 0:
+        return
+    roi = frame[y : y + h, x : x + w]
+    overlay = roi.copy()
+    cv2.fillPoly(overlay, [polygon - [x, y]], LANE_FILL, lineType=cv2.LINE_AA)
+    cv2.addWeighted(overlay, alpha, roi, 1 - alpha, 0, dst=roi)
+    for line in (lane.left, lane.right):
+        cv2.polylines(
+            frame,
+            [line.round().astype(np.int32)],
+            False,
+            LANE_EDGE,
+            max(2, round(5 * s)),
+            cv2.LINE_AA,
+        )
+
+
+def _label(frame: Frame, text: str, x: int, y: int, color: tuple[int, int, int]) -> None:
+    s = _scale(frame)
+    font, size, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.55 * s, max(1, round(1.5 * s))
+    (tw, th), base = cv2.getTextSize(text, font, size, thick)
+    y = max(y, th + base + 2)
+    cv2.rectangle(frame, (x, y - th - base - 4), (x + tw + 6, y), color, -1)
+    cv2.putText(frame, text, (x + 3, y - base - 1), font, size, TEXT, thick, cv2.LINE_AA)
+
+
+def draw_vehicles(frame: Frame, result: VehicleResult) -> None:
+    """Each shown vehicle's box with its id and score."""
+    s = _scale(frame)
+    for box, score, track_id in zip(
+        result.detections.boxes, result.detections.scores, result.detections.ids, strict=True
+    ):
+        x1, y1, x2, y2 = (round(float(v)) for v in box)
+        cv2.rectangle(frame, (x1, y1), (x2, y2), BOX, max(2, round(3 * s)), cv2.LINE_AA)
+        _label(frame, f"#{track_id} {score:.2f}", x1, y1, BOX)
+
+
+def hud_lines(lane: LaneEstimate | None, vehicles: int | None, fps: float) -> list[str]:
+    """The text of the heads-up panel."""
+    lines = []
+    if lane is None:
+        lines.append("Lane: searching")
+    else:
+        radius = "straight" if lane.curvature_m >= 9_999 else f"{lane.curvature_m:,.0f} m"
+        side = "right" if lane.offset_m > 0 else "left"
+        lines.append(f"Radius of curvature: {radius}")
+        lines.append(f"Offset: {abs(lane.offset_m):.2f} m {side} of centre")
+    if vehicles is not None:
+        lines.append(f"Vehicles in view: {vehicles}")
+    if fps > 0:
+        lines.append(f"Processing: {fps:.1f} fps")
+    return lines
+
+
+def draw_panel(frame: Frame, lines: list[str]) -> None:
+    """A dark translucent panel at the top left with one line of text per item."""
+    if not lines:
+        return
+    s = _scale(frame)
+    font, size, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.8 * s, max(1, round(2 * s))
+    line_h = round(34 * s)
+    width = max(cv2.getTextSize(t, font, size, thick)[0][0] for t in lines) + round(30 * s)
+    height = line_h * len(lines) + round(16 * s)
+    roi = frame[:height, :width]
+    roi[:] = (roi * 0.4 + np.array(PANEL) * 0.6).astype(np.uint8)
+    for i, text in enumerate(lines):
+        cv2.putText(
+            frame,
+            text,
+            (round(14 * s), round((i + 1) * line_h)),
+            font,
+            size,
+            TEXT,
+            thick,
+            cv2.LINE_AA,
+        )
+
+
+def draw_insets(frame: Frame, insets: list[NDArray[np.uint8]]) -> None:
+    """Small pictures (RGB or grey) along the top right edge."""
+    h, w = frame.shape[:2]
+    inset_w = w // 5
+    x = w - 10
+    for picture in insets:
+        if picture.ndim == 2:
+            picture = np.asarray(cv2.cvtColor(picture, cv2.COLOR_GRAY2RGB))
+        inset_h = round(picture.shape[0] * inset_w / picture.shape[1])
+        small = cv2.resize(picture, (inset_w, inset_h), interpolation=cv2.INTER_AREA)
+        x -= inset_w
+        frame[10 : 10 + inset_h, x : x + inset_w] = small
+        cv2.rectangle(frame, (x, 10), (x + inset_w - 1, 10 + inset_h - 1), TEXT, 1)
+        x -= 10
+
+
+def lane_inset(result: LaneResult) -> NDArray[np.uint8] | None:
+    """Bird's-eye mask with the pixels of each line and the fits."""
+    if result.debug is None:
+        return None
+    d = result.debug
+    picture = np.dstack([d.mask * 90] * 3).astype(np.uint8)
+    for pixels, color in ((d.left_pixels, (255, 80, 80)), (d.right_pixels, (80, 80, 255))):
+        picture[pixels.y.astype(int), pixels.x.astype(int)] = color
+    if result.lane is not None:
+        ys = np.arange(picture.shape[0], dtype=np.float64)
+        for fit in (result.lane.left_fit, result.lane.right_fit):
+            pts = np.stack([np.polyval(fit, ys), ys], axis=1).round().astype(np.int32)
+            cv2.polylines(picture, [pts], False, (255, 255, 0), 3)
+    return picture
+
+
+def heat_picture(heat: NDArray[np.float32], threshold: float) -> NDArray[np.uint8]:
+    """A heat map as a colour picture; the threshold maps to the middle of the scale."""
+    scaled = np.clip(heat / max(2 * threshold, 1e-6) * 255, 0, 255).astype(np.uint8)
+    return np.asarray(
+        cv2.cvtColor(cv2.applyColorMap(scaled, cv2.COLORMAP_INFERNO), cv2.COLOR_BGR2RGB)
+    )
+
+
+def compose(
+    frame: Frame,
+    results: Mapping[str, StageResult],
+    fps: float,
+    options: ComposeOptions | None = None,
+) -> Frame:
+    """The annotated frame: lane, vehicles, panel (and insets); the input is not modified."""
+    options = options if options is not None else ComposeOptions()
+    out = frame.copy()
+    lane_result = results.get("lane")
+    vehicle_result = results.get("vehicles")
+    lane = lane_result.lane if isinstance(lane_result, LaneResult) else None
+    if lane is not None:
+        draw_lane(out, lane, options.lane_alpha)
+    count = None
+    if isinstance(vehicle_result, VehicleResult):
+        draw_vehicles(out, vehicle_result)
+        count = len(vehicle_result.detections)
+    draw_panel(
+        out,
+        hud_lines(lane, count, fps)
+        if lane_result is not None or count is not None
+        else ([f"Processing: {fps:.1f} fps"] if fps > 0 else []),
+    )
+    if options.insets:
+        pictures = []
+        if isinstance(lane_result, LaneResult) and (p := lane_inset(lane_result)) is not None:
+            pictures.append(p)
+        if isinstance(vehicle_result, VehicleResult) and vehicle_result.debug is not None:
+            pictures.append(heat_picture(vehicle_result.debug.history_heat, 2.5))
+        draw_insets(out, pictures)
+    return out

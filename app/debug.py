@@ -1,0 +1,179 @@
+"""Frame-stepping debug mode: every intermediate of chosen frames as PNGs plus a contact sheet."""
+
+from __future__ import annotations
+
+import html
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from app.atomic import ensure_writable_dir
+from app.compose import compose, heat_picture, lane_inset
+from app.errors import InputError
+from app.pipeline import FrameOutput, Pipeline
+from app.video import Frame, probe_video, read_frames, write_image
+from lanes.finder import LaneResult
+from vehicles.detections import Detections
+from vehicles.detector import VehicleResult
+
+WARMUP_FRAMES = 30  # frames run before the first chosen one so history is as in a real run
+SCALE_COLORS = [(255, 80, 80), (255, 200, 0), (80, 255, 80), (0, 200, 255), (200, 80, 255)]
+
+
+def parse_frames(spec: str) -> tuple[int, int]:
+    """'A:B' (B excluded) or 'A' as a half-open frame range."""
+    try:
+        if ":" in spec:
+            a, b = spec.split(":", 1)
+            first, last = int(a or 0), int(b)
+        else:
+            first = int(spec)
+            last = first + 1
+    except ValueError:
+        raise InputError(f"--frames {spec!r} is not A:B (e.g. 10:20) or a frame number") from None
+    if first < 0 or last <= first:
+        raise InputError("--frames A:B needs 0 <= A < B")
+    return first, last
+
+
+def _boxes(
+    frame: Frame, detections: Detections, color: tuple[int, int, int], labels: bool = True
+) -> Frame:
+    out = frame.copy()
+    for box, score, track_id in zip(
+        detections.boxes, detections.scores, detections.ids, strict=True
+    ):
+        x1, y1, x2, y2 = (round(float(v)) for v in box)
+        cv2.rectangle(out, (x1, y1), (x2, y2), color, 3)
+        if labels:
+            text = f"#{track_id} {score:.2f}" if track_id >= 0 else f"{score:.2f}"
+            cv2.putText(out, text, (x1, max(y1 - 6, 14)), cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2)
+    return out
+
+
+def intermediates(
+    out: FrameOutput, composite: Frame, min_probability: float = 0.8
+) -> dict[str, NDArray[np.uint8]]:
+    """Named pictures of every intermediate of one processed frame, in pipeline order."""
+    pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
+    lane = out.results.get("lane")
+    if isinstance(lane, LaneResult) and lane.debug is not None:
+        pictures["lane_mask"] = (lane.debug.mask * 255).astype(np.uint8)
+        fit = lane_inset(lane)
+        if fit is not None:
+            for x1, y1, x2, y2 in lane.debug.left_pixels.windows + lane.debug.right_pixels.windows:
+                cv2.rectangle(fit, (x1, y1), (x2, y2), (0, 255, 0), 1)
+            pictures["birdseye_fit"] = fit
+    vehicles = out.results.get("vehicles")
+    if isinstance(vehicles, VehicleResult) and vehicles.debug is not None:
+        d = vehicles.debug
+        hits = out.undistorted.copy()
+        for k, band_hits in enumerate(d.hits):
+            color = SCALE_COLORS[k % len(SCALE_COLORS)]
+            strong = band_hits.decisions > 0
+            for box, value in zip(
+                band_hits.boxes[strong], band_hits.decisions[strong], strict=True
+            ):
+                x1, y1, x2, y2 = (round(float(v)) for v in box)
+                cv2.rectangle(hits, (x1, y1), (x2, y2), color, 1)
+                cv2.putText(
+                    hits, f"{value:.1f}", (x1 + 2, y1 + 12), cv2.FONT_HERSHEY_PLAIN, 0.8, color, 1
+                )
+            cv2.putText(
+                hits,
+                f"{band_hits.window_px:.0f} px",
+                (10, 30 + 22 * k),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.7,
+                color,
+                2,
+            )
+        pictures["window_hits"] = hits
+        pictures["heat_frame"] = heat_picture(d.frame_heat, 2.5)
+        pictures["heat_history"] = heat_picture(d.history_heat, 2.5)
+        pictures["regions"] = _boxes(out.undistorted, d.regions, (255, 255, 0))
+        pictures["tracks"] = _boxes(out.undistorted, vehicles.detections, (255, 60, 60))
+    pictures["composite"] = composite
+    return pictures
+
+
+def contact_sheet(frames: list[int], names: list[str]) -> str:
+    """An index.html that steps through frames (buttons or arrow keys) showing every picture."""
+    data = json.dumps({"frames": frames, "names": names})
+    cells = "".join(
+        f'<figure><img id="{html.escape(n)}"><figcaption>{html.escape(n)}</figcaption></figure>'
+        for n in names
+    )
+    return f"""<!doctype html>
+<html><head><meta charset="utf-8"><title>roadview debug</title>
+<style>body{{font-family:sans-serif;background:#222;color:#eee;margin:1em}}
+figure{{display:inline-block;margin:4px;width:32%}}img{{width:100%}}
+button{{font-size:1.1em}}</style></head>
+<body><h1>roadview debug: frame <span id="n"></span></h1>
+<p><button onclick="go(-1)">&larr; previous</button> <button onclick="go(1)">next &rarr;</button>
+ (arrow keys step)</p>
+<div>{cells}</div>
+<script>
+const D = {data}; let i = 0;
+function show() {{
+  const f = String(D.frames[i]).padStart(6, "0");
+  document.getElementById("n").textContent = D.frames[i];
+  for (const [k, n] of D.names.entries()) {{
+    document.getElementById(n).src = `frame_${{f}}/${{String(k + 1).padStart(2, "0")}}_${{n}}.png`;
+  }}
+}}
+function go(d) {{ i = Math.min(D.frames.length - 1, Math.max(0, i + d)); show(); }}
+document.addEventListener("keydown", e => {{
+  if (e.key === "ArrowLeft") go(-1); if (e.key === "ArrowRight") go(1); }});
+show();
+</script></body></html>
+"""
+
+
+def run_debug(
+    source: Path,
+    frames: tuple[int, int],
+    out_dir: Path,
+    pipeline: Pipeline,
+    log: Callable[[str], None] = print,
+) -> list[Path]:
+    """Process the clip up to the chosen frames and write their intermediates; returns files."""
+    info = probe_video(source)
+    first, last = frames
+    if first >= info.n_frames:
+        raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
+    last = min(last, info.n_frames)
+    ensure_writable_dir(out_dir)
+    pipeline.prepare(info.size)
+    start = max(0, first - WARMUP_FRAMES)
+    written: list[Path] = []
+    names: list[str] = []
+    done: list[int] = []
+    for offset, frame in enumerate(read_frames(source, info, start, last)):
+        index = start + offset
+        out = pipeline.run(frame)
+        if index < first:
+            continue
+        pictures = intermediates(out, compose(out.undistorted, out.results, 0.0))
+        folder = out_dir / f"frame_{index:06d}"
+        folder.mkdir(exist_ok=True)
+        for k, (name, picture) in enumerate(pictures.items(), start=1):
+            path = folder / f"{k:02d}_{name}.png"
+            write_image(
+                path,
+                picture
+                if picture.ndim == 3
+                else np.asarray(cv2.cvtColor(picture, cv2.COLOR_GRAY2RGB)),
+            )
+            written.append(path)
+        names = list(pictures)
+        done.append(index)
+        log(f"frame {index}: {len(pictures)} pictures")
+    index_path = out_dir / "index.html"
+    index_path.write_text(contact_sheet(done, names))
+    written.append(index_path)
+    return written
