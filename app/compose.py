@@ -31,7 +31,7 @@ class ComposeOptions:
 
 def _scale(frame: Frame) -> float:
     """Drawing scale: 1.0 at 720 rows, so text stays readable from 540 to 1080 rows."""
-    return frame.shape[0] / 720.0
+    return float(frame.shape[0]) / 720.0
 
 
 def draw_lane(frame: Frame, lane: LaneEstimate, alpha: float) -> None:
@@ -121,7 +121,7 @@ def draw_panel(frame: Frame, lines: list[str]) -> None:
 
 def draw_insets(frame: Frame, insets: list[NDArray[np.uint8]]) -> None:
     """Small pictures (RGB or grey) along the top right edge."""
-    h, w = frame.shape[:2]
+    w = frame.shape[1]
     inset_w = w // 5
     x = w - 10
     for picture in insets:
