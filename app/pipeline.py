@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
+from queue import Empty, Queue
 from typing import TextIO
 
 from app.atomic import atomic_output
@@ -36,12 +40,23 @@ class FrameOutput:
 
 
 class Pipeline:
-    """Undistorts frames of one size and runs the stages on them in order."""
+    """Undistorts frames of one size and runs the stages on them.
 
-    def __init__(self, calibration: Calibration | None, stages: Sequence[FrameStage]) -> None:
+    The stages are independent of each other (each sees the undistorted frame), so with
+    `parallel` all but the first run in worker threads while the first runs in the caller's.
+    """
+
+    def __init__(
+        self, calibration: Calibration | None, stages: Sequence[FrameStage], parallel: bool = True
+    ) -> None:
         self.calibration = calibration
         self.stages = list(stages)
         self._undistorter: Undistorter | None = None
+        self._pool = (
+            ThreadPoolExecutor(max_workers=len(stages) - 1)
+            if parallel and len(stages) > 1
+            else None
+        )
 
     def prepare(self, size: tuple[int, int]) -> None:
         """Build the undistortion maps for frames of `size` and reset stage history."""
@@ -67,12 +82,52 @@ class Pipeline:
         t0 = time.perf_counter()
         undistorted = self.undistort(frame)
         timings = {"undistort": (time.perf_counter() - t0) * 1000}
-        results: dict[str, StageResult] = {}
-        for stage in self.stages:
+
+        def timed(stage: FrameStage) -> tuple[StageResult, float]:
             t0 = time.perf_counter()
-            results[stage.record_key] = stage.process(undistorted)
-            timings[stage.record_key] = (time.perf_counter() - t0) * 1000
+            result = stage.process(undistorted)
+            return result, (time.perf_counter() - t0) * 1000
+
+        if self._pool is not None:
+            futures = [self._pool.submit(timed, stage) for stage in self.stages[1:]]
+            outcomes = [timed(self.stages[0])] + [f.result() for f in futures]
+        else:
+            outcomes = [timed(stage) for stage in self.stages]
+        results: dict[str, StageResult] = {}
+        for stage, (result, ms) in zip(self.stages, outcomes, strict=True):
+            results[stage.record_key] = result
+            timings[stage.record_key] = ms
         return FrameOutput(undistorted=undistorted, results=results, timings_ms=timings)
+
+
+def prefetch(frames: Iterator[Frame], depth: int = 4) -> Iterator[Frame]:
+    """Decode ahead in a thread so reading the pipe overlaps with processing."""
+    queue: Queue[Frame | BaseException | None] = Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def pump() -> None:
+        try:
+            for frame in frames:
+                if stop.is_set():
+                    break
+                queue.put(frame)
+            queue.put(None)
+        except BaseException as error:  # handed to the consumer, which re-raises it
+            queue.put(error)
+
+    thread = threading.Thread(target=pump, daemon=True)
+    thread.start()
+    try:
+        while (item := queue.get()) is not None:
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        while thread.is_alive():
+            with contextlib.suppress(Empty):
+                queue.get_nowait()
+            thread.join(timeout=0.01)
 
 
 @dataclass(frozen=True)
@@ -132,7 +187,7 @@ def process_video(
             audio_end_s=last / info.fps if end_s is not None else None,
         )
         try:
-            for offset, frame in enumerate(read_frames(source, info, first, last)):
+            for offset, frame in enumerate(prefetch(read_frames(source, info, first, last))):
                 index = first + offset
                 out = pipeline.run(frame)
                 writer.write(compositor(out.undistorted, out.results, progress.fps))

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import contextlib
 import subprocess
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from queue import Full, Queue
 from typing import IO
 
 import cv2
@@ -147,7 +149,7 @@ class VideoWriter:
         audio_from: Path | None = None,
         audio_start_s: float = 0.0,
         audio_end_s: float | None = None,
-        preset: str = "veryfast",
+        preset: str = "ultrafast",
         crf: int = 20,
     ) -> None:
         self.size = size
@@ -199,19 +201,35 @@ class VideoWriter:
             str(path),
         ]
         self._process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+        # Frames go to ffmpeg from a thread so a full pipe never stalls the processing.
+        self._queue: Queue[Frame | None] = Queue(maxsize=4)
+        self._broken = False
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        assert self._process.stdin is not None
+        while (frame := self._queue.get()) is not None:
+            if self._broken:
+                continue
+            try:
+                self._process.stdin.write(frame.tobytes())
+            except (BrokenPipeError, ValueError):
+                self._broken = True
 
     def write(self, frame: Frame) -> None:
         """Append one RGB frame of the writer's size."""
-        assert self._process.stdin is not None
         if (frame.shape[1], frame.shape[0]) != self.size:
             raise ValueError(f"frame size {frame.shape[1]}x{frame.shape[0]} != {self.size}")
-        try:
-            self._process.stdin.write(np.ascontiguousarray(frame).tobytes())
-        except BrokenPipeError:
-            self.close()
+        if self._broken:
+            self.close()  # raises with ffmpeg's message
+        self._queue.put(np.ascontiguousarray(frame))
 
     def close(self) -> None:
         """Finish the file; raise InputError if ffmpeg failed."""
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
         if self._process.stdin is not None and not self._process.stdin.closed:
             with contextlib.suppress(BrokenPipeError):
                 self._process.stdin.close()
@@ -224,8 +242,12 @@ class VideoWriter:
 
     def abort(self) -> None:
         """Stop encoding without finishing the file."""
+        self._broken = True
         self._process.kill()
         self._process.wait()
+        if self._thread.is_alive():
+            with contextlib.suppress(Full):
+                self._queue.put_nowait(None)
 
 
 def read_image(path: Path) -> Frame:

@@ -35,8 +35,13 @@ def split_peaks(
     labels, n = ndimage.label(peaks)
     if n < 2:
         return [region]
-    centres = np.array(ndimage.center_of_mass(local, labels, range(1, n + 1)))
-    values = np.array(ndimage.maximum(local, labels, range(1, n + 1)))
+    # Peak plateaus are tiny: their pixel coordinates give centre and value without a full sort.
+    ys, xs = np.nonzero(labels)
+    ids = labels[ys, xs] - 1
+    counts = np.bincount(ids, minlength=n)
+    centres = np.stack([np.bincount(ids, ys, n) / counts, np.bincount(ids, xs, n) / counts], 1)
+    values = np.zeros(n)
+    np.maximum.at(values, ids, local[ys, xs])
     order = np.argsort(values)[::-1]
     keep = [order[0]]
     for k in order[1:]:
@@ -101,17 +106,22 @@ class Heatmap:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Boxes (frame pixels) and peak heat of the thresholded, labelled, split regions."""
         heat = self.combined
-        labels, n = ndimage.label(heat > self.threshold)
+        labels, _ = ndimage.label(heat > self.threshold)
         boxes, peaks = [], []
-        for index in range(1, n + 1):
-            region = labels == index
-            for part in split_peaks(heat, region, valley):
-                peak = float(heat[part].max())
+        for index, window in enumerate(ndimage.find_objects(labels), start=1):
+            if window is None:
+                continue
+            # Work inside the region's bounding box (a few hundred pixels, not the whole map).
+            local_heat = heat[window]
+            region = labels[window] == index
+            for part in split_peaks(local_heat, region, valley):
+                peak = float(local_heat[part].max())
                 # The box covers the part's heat above a fraction of its peak: tighter than the
                 # union of square windows.
-                core = part & (heat >= max(self.threshold, peak_fraction * peak))
+                core = part & (local_heat >= max(self.threshold, peak_fraction * peak))
                 ys, xs = np.nonzero(core)
-                boxes.append([xs.min(), ys.min(), xs.max() + 1, ys.max() + 1])
+                y0, x0 = window[0].start, window[1].start
+                boxes.append([x0 + xs.min(), y0 + ys.min(), x0 + xs.max() + 1, y0 + ys.max() + 1])
                 peaks.append(peak)
         out = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) * self.scale
         return out, np.asarray(peaks, dtype=np.float64)

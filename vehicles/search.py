@@ -59,11 +59,17 @@ def score_windows(maps: FeatureMaps, weights: LinearWeights) -> NDArray[np.float
             score += per_block[i : i + ny, j : j + nx, i * nb + j]
     # Spatial: the same at the binned resolution, stepping s bins per cell.
     s, ss = cfg.pixels_per_cell // cfg.spatial_factor, cfg.spatial_size
-    hs, ws, _ = maps.spatial.shape
-    per_bin = (maps.spatial.reshape(-1, 3) @ weights.spatial.T).reshape(hs, ws, ss * ss)
-    for u in range(ss):
-        for v in range(ss):
-            score += per_bin[u : u + s * (ny - 1) + 1 : s, v : v + s * (nx - 1) + 1 : s, u * ss + v]
+    kernels = weights.spatial.reshape(ss, ss, 3)
+    for c in range(3):
+        # Correlation anchored at the window's top-left bin, then one value per cell step.
+        full = cv2.filter2D(
+            np.ascontiguousarray(maps.spatial[:, :, c]),
+            cv2.CV_32F,
+            kernels[:, :, c],
+            anchor=(0, 0),
+            borderType=cv2.BORDER_CONSTANT,
+        )
+        score += full[: s * (ny - 1) + 1 : s, : s * (nx - 1) + 1 : s]
     # Histograms: one weight vector for every cell of the window, so a box sum of per-cell scores.
     per_cell = maps.histograms @ weights.hist
     integral = np.pad(per_cell, ((1, 0), (1, 0))).cumsum(0).cumsum(1)

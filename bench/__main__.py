@@ -1,0 +1,200 @@
+"""`python -m bench`: ms per frame of each stage on the shared clips, end-to-end frames per second
+and peak memory of `roadview process`, a decode/re-encode floor, and a naive per-window detector."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from app.assembly import build_stages
+from app.compose import compose
+from app.pipeline import Pipeline
+from app.video import VideoWriter, probe_video, read_frames
+from camera_cal import default_calibration_path, load_calibration
+from vehicles.detector import VehicleDetector
+from vehicles.features import patch_features
+from vehicles.model import default_model_path, load_model
+from vehicles.search import band_geometry
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _clip_paths(data: Path) -> list[Path]:
+    return [data / "videos" / f"{c}.mp4" for c in ("test_video", "project_cut_1", "project_cut_2")]
+
+
+def stage_times(clip: Path) -> dict[str, float]:
+    """Mean ms per frame of decode, undistort, lanes, vehicles and compose, on one core."""
+    cv2.setNumThreads(1)
+    info = probe_video(clip)
+    pipeline = Pipeline(load_calibration(default_calibration_path()), build_stages())
+    pipeline.prepare(info.size)
+    totals: dict[str, float] = {"decode": 0.0, "compose": 0.0}
+    frames = read_frames(clip, info)
+    n = 0
+    while True:
+        t0 = time.perf_counter()
+        frame = next(frames, None)
+        if frame is None:
+            break
+        totals["decode"] += (time.perf_counter() - t0) * 1000
+        out = pipeline.run(frame)
+        for key, value in out.timings_ms.items():
+            totals[key] = totals.get(key, 0.0) + value
+        t0 = time.perf_counter()
+        compose(out.undistorted, out.results, 25.0)
+        totals["compose"] += (time.perf_counter() - t0) * 1000
+        n += 1
+    cv2.setNumThreads(-1)
+    return {k: v / n for k, v in totals.items()}
+
+
+def floor_fps(clip: Path) -> float:
+    """Frames per second of a plain decode and re-encode (no processing)."""
+    info = probe_video(clip)
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        writer = VideoWriter(Path(tmp) / "floor.mp4", info.size, info.fps)
+        n = 0
+        for frame in read_frames(clip, info):
+            writer.write(frame)
+            n += 1
+        writer.close()
+        return n / (time.perf_counter() - t0)
+
+
+def end_to_end(clip: Path) -> dict[str, float]:
+    """`roadview process` with lanes, vehicles, video and record: fps and peak memory."""
+    info = probe_video(clip)
+    with tempfile.TemporaryDirectory() as tmp:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        t0 = time.perf_counter()
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "app",
+                "process",
+                str(clip),
+                "-o",
+                f"{tmp}/o.mp4",
+                "--json",
+                f"{tmp}/o.jsonl",
+            ],
+            check=True,
+            capture_output=True,
+        )
+        seconds = time.perf_counter() - t0
+        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return {
+        "fps": info.n_frames / seconds,
+        "seconds": seconds,
+        "peak_rss_mib": max(peak, before) / 1024,
+    }
+
+
+def naive_detector_ms(clip: Path, frames: int = 2) -> dict[str, float]:
+    """Per-window reference: every window cut, resized, featurised and classified one by one."""
+    cv2.setNumThreads(1)
+    model = load_model(default_model_path())
+    detector = VehicleDetector(model, interleave=False)
+    info = probe_video(clip)
+    cfg = model.config
+    naive, dense = [], []
+    for frame in list(read_frames(clip, info, 0, frames)):
+        t0 = time.perf_counter()
+        n_windows = 0
+        for band in detector.config.bands:
+            x0, y0, x1, y1, scale = band_geometry(
+                band, info.size, cfg.patch_size, cfg.pixels_per_cell
+            )
+            step = scale * cfg.pixels_per_cell * band.step_cells
+            win = scale * cfg.patch_size
+            for y in np.arange(y0, y1 - win + 1, step):
+                for x in np.arange(x0, x1 - win + 1, step):
+                    patch = frame[round(y) : round(y + win), round(x) : round(x + win)]
+                    model.decision_function(patch_features(patch, cfg)[None])
+                    n_windows += 1
+        naive.append((time.perf_counter() - t0) * 1000)
+        t0 = time.perf_counter()
+        detector.search(frame)
+        dense.append((time.perf_counter() - t0) * 1000)
+    cv2.setNumThreads(-1)
+    return {
+        "naive_ms": float(np.mean(naive)),
+        "dense_all_bands_ms": float(np.mean(dense)),
+        "windows": n_windows,
+        "speedup": float(np.mean(naive) / np.mean(dense)),
+    }
+
+
+def patch_feature_ms(data: Path, repeats: int = 2000) -> float:
+    """Features of one 64x64 patch, in ms."""
+    image = np.asarray(cv2.imread(str(data / "test_images" / "test1.jpg")), np.uint8)
+    rgb = np.ascontiguousarray(image[400:464, 800:864, ::-1])
+    config = load_model(default_model_path()).config
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        patch_features(rgb, config)
+    return (time.perf_counter() - t0) * 1000 / repeats
+
+
+def train_seconds(data: Path) -> float:
+    """Wall time of `roadview train` (search included) into a temporary file."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        subprocess.run(
+            [sys.executable, "-m", "app", "train", "--data", str(data), "--out", f"{tmp}/m.npz"],
+            check=True,
+            capture_output=True,
+        )
+        return time.perf_counter() - t0
+
+
+def main() -> None:
+    """Run every benchmark, print a table and write output/bench.json."""
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--data", type=Path, default=ROOT / "data")
+    parser.add_argument("--train", action="store_true", help="also time training (~1 min)")
+    args = parser.parse_args()
+    report: dict[str, Any] = {"clips": {}}
+    for clip in _clip_paths(args.data):
+        stages = stage_times(clip)
+        e2e = end_to_end(clip)
+        floor = floor_fps(clip)
+        report["clips"][clip.stem] = {"stages_ms": stages, "end_to_end": e2e, "floor_fps": floor}
+        print(f"{clip.stem}: " + ", ".join(f"{k} {v:.1f} ms" for k, v in stages.items()))
+        print(
+            f"  end to end {e2e['fps']:.1f} fps (peak {e2e['peak_rss_mib']:.0f} MiB); "
+            f"decode+encode floor {floor:.1f} fps"
+        )
+    naive = naive_detector_ms(_clip_paths(args.data)[0])
+    report["naive_detector"] = naive
+    print(
+        f"window search, all bands: dense {naive['dense_all_bands_ms']:.1f} ms vs naive "
+        f"per-window {naive['naive_ms']:.0f} ms ({naive['windows']} windows): "
+        f"{naive['speedup']:.0f}x"
+    )
+    report["patch_features_ms"] = patch_feature_ms(args.data)
+    print(f"features of one 64x64 patch: {report['patch_features_ms']:.3f} ms")
+    if args.train:
+        report["train_s"] = train_seconds(args.data)
+        print(f"training (features, C search, calibration, report): {report['train_s']:.0f} s")
+    out = ROOT / "output" / "bench.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps(report, indent=2))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
