@@ -41,8 +41,9 @@ def test_process_video_undistorts(test_video: Path, tmp_path: Path) -> None:
     from camera_cal import build_undistorter, default_calibration_path, load_calibration
 
     out = tmp_path / "undistorted.mp4"
-    result = run_cli("process", test_video, "-o", out, "--end", "0.2", "--no-lanes",
-                     "--no-vehicles")
+    result = run_cli(
+        "process", test_video, "-o", out, "--end", "0.2", "--no-lanes", "--no-vehicles"
+    )
     assert result.returncode == 0, result.stderr
     source = next(read_frames(test_video, probe_video(test_video)))[150:]
     written = next(read_frames(out, probe_video(out))).astype(int)[150:]  # below the HUD panel

@@ -30,8 +30,10 @@ def split_peaks(
     heat: NDArray[np.float32], region: NDArray[np.bool_], valley: float
 ) -> list[NDArray[np.bool_]]:
     """Split a region into one part per heat peak when the peaks are separated by a clear valley."""
-    local = heat * region
-    peaks = (local == ndimage.maximum_filter(local, size=5)) & region & (local > 0)
+    # Smoothed heat, and only peaks reaching half the strongest: plateau bumps are not vehicles.
+    local = ndimage.uniform_filter(heat * region, size=3) * region
+    peaks = (local == ndimage.maximum_filter(local, size=5)) & region
+    peaks &= local >= 0.5 * local.max()
     labels, n = ndimage.label(peaks)
     if n < 2:
         return [region]

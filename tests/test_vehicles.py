@@ -1,0 +1,134 @@
+"""Vehicle detector: dense scoring, pasted vehicles, Heatmap history, tracker ids, real clips."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from app.evaluate import evaluate, iou, load_labels
+from tests.helpers import run_cli
+from vehicles.config import Band, DetectorConfig
+from vehicles.detections import Detections
+from vehicles.detector import VehicleDetector
+from vehicles.features import patch_features
+from vehicles.heatmap import Heatmap
+from vehicles.model import VehicleModel, default_model_path, load_model
+from vehicles.search import LinearWeights, search_band
+from vehicles.tracker import Tracker
+
+
+@pytest.fixture(scope="module")
+def model() -> VehicleModel:
+    return load_model(default_model_path())
+
+
+def _rgb(path: Path) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(cv2.imread(str(path)), np.uint8)[:, :, ::-1])
+
+
+def test_dense_scores_equal_window_by_window(model: VehicleModel, data_dir: Path) -> None:
+    frame = _rgb(data_dir / "test_images" / "test4.jpg")
+    band = Band(window=96 / 720, top=390 / 720, bottom=540 / 720, left=0.5, right=1.0)
+    hits = search_band(frame, band, LinearWeights.from_model(model))
+    # The same windows cut out of the same scaled band and scored one by one.
+    x0, y0, scale = 640, 390, 1.5
+    crop = frame[390:540, 640:1280]
+    size = (round(640 / scale), round(150 / scale))
+    scaled = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
+    rng = np.random.default_rng(0)
+    for k in rng.choice(len(hits.decisions), 25, replace=False):
+        bx, by = hits.boxes[k, 0], hits.boxes[k, 1]
+        px = round((bx - x0) / (640 / size[0]))
+        py = round((by - y0) / (150 / size[1]))
+        patch = np.ascontiguousarray(scaled[py : py + 64, px : px + 64])
+        one = model.decision_function(patch_features(patch, model.config)[None])[0]
+        assert hits.decisions[k] == pytest.approx(one, abs=1e-4)
+
+
+def _vehicle_patch(data_dir: Path) -> np.ndarray:
+    with zipfile.ZipFile(data_dir / "vehicles.zip") as archive:
+        data = archive.read("vehicles/KITTI_extracted/5.png")
+    return np.asarray(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR))[:, :, ::-1]
+
+
+@pytest.mark.parametrize(("size", "x", "y"), [(64, 300, 400), (96, 500, 410), (128, 880, 420)])
+def test_pasted_vehicle_is_found(
+    model: VehicleModel, data_dir: Path, size: int, x: int, y: int
+) -> None:
+    road = _rgb(data_dir / "test_images" / "straight_lines1.jpg").copy()
+    patch = cv2.resize(_vehicle_patch(data_dir), (size, size), interpolation=cv2.INTER_CUBIC)
+    road[y : y + size, x : x + size] = patch
+    detector = VehicleDetector(model, DetectorConfig().for_still(), interleave=False)
+    found = detector.process(road).detections
+    truth = (x, y, x + size, y + size)
+    assert len(found) >= 1
+    assert max(iou(box, truth) for box in found.boxes) >= 0.5
+
+
+def test_heatmap_suppresses_a_one_frame_false_alarm() -> None:
+    heatmap = Heatmap(history=8, threshold=2.5, scale=4)
+    steady = np.array([[400.0, 400, 496, 496]] * 4)  # four overlapping windows every frame
+    alarm = np.array([[100.0, 420, 164, 484]] * 4)
+    for frame in range(8):
+        boxes = np.vstack([steady, alarm]) if frame == 5 else steady
+        heatmap.add((1280, 720), boxes, np.ones(len(boxes)))
+        found, _ = heatmap.regions(0.35, 0.6)
+        assert not any(b[2] < 300 for b in found)  # the single-frame alarm never shows
+    assert len(found) == 1 and iou(found[0], steady[0]) > 0.8
+
+
+def test_heatmap_splits_two_touching_vehicles() -> None:
+    heatmap = Heatmap(history=1, threshold=2.5, scale=4)
+    windows = []
+    for cx in (400, 528):  # two cars side by side: their heat touches above the threshold
+        for dx in (-16, 0, 16):
+            windows.append([cx - 48 + dx, 400, cx + 48 + dx, 480])
+    heatmap.add((1280, 720), np.array(windows, float), np.ones(len(windows)) * 3)
+    assert len(heatmap.regions(0.35, 0.0)[0]) == 1  # never splitting: one merged box
+    found, _ = heatmap.regions(0.35, 0.6)
+    assert len(found) == 2
+    assert max(iou(found[0], [352, 400, 448, 480]), iou(found[1], [352, 400, 448, 480])) > 0.6
+
+
+def test_track_ids_stay_constant_on_a_moving_box() -> None:
+    tracker = Tracker(match_iou=0.2, smoothing=0.5, confirm_frames=3, max_missed=5, show_missed=2)
+    ids = []
+    for frame in range(30):
+        x = 300 + 6 * frame
+        boxes = np.array([[x, 400, x + 100, 470], [900 - 4 * frame, 410, 1000 - 4 * frame, 480]])
+        if frame in (12, 13):  # a short miss of the second car
+            boxes = boxes[:1]
+        shown = tracker.update(Detections.from_boxes(boxes, np.ones(len(boxes))))
+        ids.append(sorted(shown.ids.tolist()))
+    assert ids[0] == [] and ids[1] == []  # not shown until confirmed
+    assert all(i == [1, 2] for i in ids[2:])  # same ids throughout, kept through the miss
+    for _ in range(6):
+        shown = tracker.update(Detections.from_boxes(np.zeros((0, 4)), np.zeros(0)))
+    assert len(shown) == 0 and not tracker.tracks  # dropped after several frames unseen
+
+
+@pytest.mark.slow
+def test_test_video_vehicles(data_dir: Path, tmp_path: Path) -> None:
+    record = tmp_path / "r.jsonl"
+    result = run_cli(
+        "process",
+        data_dir / "videos" / "test_video.mp4",
+        "-o",
+        tmp_path / "o.mp4",
+        "--json",
+        record,
+        "--no-lanes",
+    )
+    assert result.returncode == 0, result.stderr
+    records = [json.loads(line) for line in record.read_text().splitlines()]
+    scores = evaluate(load_labels(data_dir / "labels" / "test_video.json"), records)
+    v = scores["vehicles"]["iou_0.5"]
+    assert v["precision"] >= 0.95 and v["recall"] >= 0.90
+    assert v["false_positives_per_frame"] <= 0.05
+    ids = {d["id"] for r in records[10:] for d in r["vehicles"]}
+    assert len(ids) == 2  # the two cars keep one id each through the clip
