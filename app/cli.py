@@ -141,7 +141,9 @@ def process_command(
         return compose(frame, results, fps, options)
 
     if still:
-        summary = process_still(source, output, pipeline, record, compositor)
+        summary = process_still(
+            source, output, pipeline, record, compositor, log=lambda m: typer.echo(m, err=True)
+        )
     else:
         if is_image(output):
             raise InputError(
@@ -282,6 +284,10 @@ def main() -> None:
     except KeyboardInterrupt:
         typer.echo("roadview: interrupted; no output was written", err=True)
         sys.exit(130)
+    except SystemExit as exit_:
+        if exit_.code == 130:  # typer turns Ctrl-C into a silent exit 130
+            typer.echo("roadview: interrupted; no output was written", err=True)
+        raise
     except Exception as error:
         if _verbose:
             traceback.print_exc()

@@ -60,6 +60,7 @@ class Pipeline:
 
     def prepare(self, size: tuple[int, int]) -> None:
         """Build the undistortion maps for frames of `size` and reset stage history."""
+        self._undistorter = None
         if self.calibration is not None:
             try:
                 self._undistorter = build_undistorter(self.calibration, size)
@@ -196,8 +197,12 @@ def process_video(
                 count += 1
                 progress.update()
             progress.close()
-            if count == 0:
-                raise InputError(f"{source} yielded no frames; the file may be truncated")
+            expected = last - first
+            if count == 0 or count < expected - max(2, expected // 50):
+                raise InputError(
+                    f"{source} is truncated or damaged: decoded {count} of {expected} frames; "
+                    "re-export or re-download the video"
+                )
         except BaseException:
             writer.abort()
             raise
@@ -211,11 +216,18 @@ def process_still(
     pipeline: Pipeline,
     record: Path | None = None,
     compositor: Compositor = plain_compositor,
+    log: Callable[[str], None] = lambda message: None,
 ) -> RunSummary:
     """Process one still image into an annotated image (and a one-line record)."""
     image = read_image(source)
     started = time.perf_counter()
-    pipeline.prepare((image.shape[1], image.shape[0]))
+    try:
+        pipeline.prepare((image.shape[1], image.shape[0]))
+    except InputError as error:
+        # A still of another shape is still processed, without undistortion, and says so.
+        log(f"note: {error}; processing it without undistortion")
+        pipeline.calibration = None
+        pipeline.prepare((image.shape[1], image.shape[0]))
     out = pipeline.run(image)
     composed = compositor(out.undistorted, out.results, 0.0)
     with ExitStack() as outputs:

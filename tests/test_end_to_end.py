@@ -1,0 +1,208 @@
+"""`roadview process` and `debug` end to end: odd inputs, failures, composite, debug pictures."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from app.video import ffmpeg_binary, probe_video, read_frames
+from tests.helpers import assert_one_line_error, count_frames, run_cli
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str, Path]:
+    """Short derived clips: other sizes, a truncated file, an empty one."""
+    folder = tmp_path_factory.mktemp("clips")
+    out = {}
+    for name, size in (("small", "640:360"), ("wide960", "960:540"), ("square", "640:480")):
+        out[name] = folder / f"{name}.mp4"
+        subprocess.run(
+            [
+                ffmpeg_binary(),
+                "-loglevel",
+                "error",
+                "-i",
+                str(test_video),
+                "-vf",
+                f"scale={size}",
+                "-t",
+                "0.4",
+                str(out[name]),
+            ],
+            check=True,
+        )
+    out["truncated"] = folder / "truncated.mp4"
+    out["truncated"].write_bytes(test_video.read_bytes()[:400_000])
+    out["empty"] = folder / "empty.mp4"
+    out["empty"].write_bytes(b"")
+    return out
+
+
+def test_other_resolution_same_aspect_is_scaled(clips: dict[str, Path], tmp_path: Path) -> None:
+    out = tmp_path / "o.mp4"
+    result = run_cli("process", clips["small"], "-o", out)
+    assert result.returncode == 0, result.stderr
+    info, frames = count_frames(out)
+    assert info.size == (640, 360) and frames == 10
+
+
+def test_other_camera_with_calibration_none(clips: dict[str, Path], tmp_path: Path) -> None:
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli(
+        "process", clips["wide960"], "-o", out, "--json", record, "--calibration", "none"
+    )
+    assert result.returncode == 0, result.stderr
+    assert count_frames(out)[0].size == (960, 540)
+    lanes = [json.loads(line)["lane"] for line in record.read_text().splitlines()]
+    assert all(lane is not None for lane in lanes)
+    # The lane is found at 960x540 as at 1280x720: left line in the left half, right in the right.
+    assert lanes[-1]["left"][0][0] < 480 < lanes[-1]["right"][0][0]
+
+
+@pytest.mark.parametrize(
+    ("clip", "fragment"),
+    [("square", "aspect ratio"), ("truncated", "truncated"), ("empty", "empty")],
+)
+def test_bad_videos(clips: dict[str, Path], tmp_path: Path, clip: str, fragment: str) -> None:
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli("process", clips[clip], "-o", out, "--json", record)
+    assert_one_line_error(result, fragment)
+    assert not out.exists() and not record.exists()
+    assert not list(tmp_path.iterdir())  # no temporary files left either
+
+
+def test_corrupt_calibration_and_model(clips: dict[str, Path], tmp_path: Path) -> None:
+    bad_cal, bad_model = tmp_path / "cal.json", tmp_path / "model.npz"
+    bad_cal.write_text('{"format_version": 1, "camera_matrix": "x"}')
+    bad_model.write_bytes(b"PK\x03\x04 not really")
+    out = tmp_path / "o.mp4"
+    assert_one_line_error(
+        run_cli("process", clips["small"], "-o", out, "--calibration", bad_cal), "calibration"
+    )
+    assert_one_line_error(
+        run_cli("process", clips["small"], "-o", out, "--model", bad_model), "corrupt"
+    )
+    assert not out.exists()
+
+
+def test_verbose_shows_the_traceback(tmp_path: Path) -> None:
+    result = run_cli("--verbose", "process", tmp_path / "missing.mp4")
+    assert result.returncode != 0 and "Traceback" in result.stderr
+
+
+def test_ctrl_c_leaves_no_output(data_dir: Path, tmp_path: Path) -> None:
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "app",
+            "process",
+            str(data_dir / "videos" / "project_cut_2.mp4"),
+            "-o",
+            str(out),
+            "--json",
+            str(record),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(3.0)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    assert not out.exists() and not record.exists()
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("kind", ["grey", "rgba", "odd", "tiny"])
+def test_unusual_stills_are_processed(data_dir: Path, tmp_path: Path, kind: str) -> None:
+    image = np.asarray(cv2.imread(str(data_dir / "test_images" / "test1.jpg")), np.uint8)
+    made = {
+        "grey": cv2.cvtColor(image, cv2.COLOR_BGR2GRAY),
+        "rgba": cv2.cvtColor(image, cv2.COLOR_BGR2BGRA),
+        "odd": cv2.resize(image, (641, 363)),
+        "tiny": cv2.resize(image, (97, 61)),
+    }[kind]
+    source, out = tmp_path / f"{kind}.png", tmp_path / f"{kind}_out.png"
+    cv2.imwrite(str(source), made)
+    result = run_cli("process", source, "-o", out)
+    assert result.returncode == 0, result.stderr
+    written = cv2.imread(str(out))
+    assert written is not None and written.shape[:2] == made.shape[:2]
+
+
+def test_composite_draws_lane_and_boxes_where_the_record_says(
+    data_dir: Path, tmp_path: Path
+) -> None:
+    source = data_dir / "test_images" / "test4.jpg"
+    out, record = tmp_path / "o.png", tmp_path / "o.jsonl"
+    assert run_cli("process", source, "-o", out, "--json", record).returncode == 0
+    plain = tmp_path / "plain.png"
+    assert run_cli("process", source, "-o", plain, "--no-lanes", "--no-vehicles").returncode == 0
+    drawn = np.asarray(cv2.imread(str(out)), np.uint8)[:, :, ::-1].astype(int)
+    base = np.asarray(cv2.imread(str(plain)), np.uint8)[:, :, ::-1].astype(int)
+    r = json.loads(record.read_text())
+    assert r["lane"] is not None and len(r["vehicles"]) >= 1
+    # Inside the lane (between the boundaries, near the bottom) the fill turns pixels green.
+    y = 650
+    xl = np.interp(
+        y, [p[1] for p in r["lane"]["left"]][::-1], [p[0] for p in r["lane"]["left"]][::-1]
+    )
+    xr = np.interp(
+        y, [p[1] for p in r["lane"]["right"]][::-1], [p[0] for p in r["lane"]["right"]][::-1]
+    )
+    inside = (drawn[y, int(xl) + 40 : int(xr) - 40] - base[y, int(xl) + 40 : int(xr) - 40]).mean(0)
+    assert inside[1] > 10 and inside[1] > inside[0]
+    # Each box's edges are drawn in the box colour (red dominant) where the record puts them.
+    for vehicle in r["vehicles"]:
+        x1, y1, _, y2 = (round(v) for v in vehicle["box"])
+        edge = drawn[(y1 + y2) // 2, x1 - 1 : x1 + 2]
+        assert (edge[:, 0] > 200).any() and (edge[:, 0] > edge[:, 2] + 80).any()
+
+
+def test_debug_writes_every_intermediate(test_video: Path, tmp_path: Path) -> None:
+    result = run_cli("debug", test_video, "--frames", "12:14", "--out", tmp_path / "dbg")
+    assert result.returncode == 0, result.stderr
+    expected = [
+        "undistorted",
+        "lane_mask",
+        "birdseye_fit",
+        "window_hits",
+        "heat_frame",
+        "heat_history",
+        "regions",
+        "tracks",
+        "composite",
+    ]
+    for frame in (12, 13):
+        names = sorted(p.name for p in (tmp_path / "dbg" / f"frame_{frame:06d}").iterdir())
+        assert [n.split("_", 1)[1].removesuffix(".png") for n in names] == expected
+        for name in names:
+            assert cv2.imread(str(tmp_path / "dbg" / f"frame_{frame:06d}" / name)) is not None
+    sheet = (tmp_path / "dbg" / "index.html").read_text()
+    assert '"frames": [12, 13]' in sheet and "ArrowRight" in sheet
+    bad = run_cli("debug", test_video, "--frames", "9:3", "--out", tmp_path / "x")
+    assert_one_line_error(bad, "--frames")
+
+
+def test_start_end_and_frame_numbers(test_video: Path, tmp_path: Path) -> None:
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli(
+        "process", test_video, "-o", out, "--json", record, "--start", "0.4", "--end", "1.0"
+    )
+    assert result.returncode == 0, result.stderr
+    frames = [json.loads(line)["frame"] for line in record.read_text().splitlines()]
+    assert frames == list(range(10, 25))
+    assert count_frames(out)[1] == 15
+    first = next(read_frames(out, probe_video(out)))
+    assert first.shape == (720, 1280, 3)
