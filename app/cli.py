@@ -105,7 +105,10 @@ def default_output(source: Path) -> Path:
 def process_command(
     source: Annotated[Path, typer.Argument(metavar="INPUT", help="Video or still image.")],
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Output file [NAME_roadview.EXT].")
+        Path | None,
+        typer.Option(
+            "-o", "--output", help="Output file (default: NAME_roadview.EXT beside the input)."
+        ),
     ] = None,
     record: Annotated[
         Path | None, typer.Option("--json", help="Per-frame JSON-lines record.")
@@ -119,7 +122,9 @@ def process_command(
     vehicles: Annotated[
         bool, typer.Option("--vehicles/--no-vehicles", help="Detect and track vehicles.")
     ] = True,
-    model: Annotated[Path | None, typer.Option(help="Vehicle model file [shipped].")] = None,
+    model: Annotated[
+        Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
+    ] = None,
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
@@ -160,11 +165,15 @@ def process_command(
 def debug_command(
     source: Annotated[Path, typer.Argument(metavar="INPUT", help="Video to step through.")],
     frames: Annotated[str, typer.Option(help="Frames A:B (B excluded) or one frame number.")],
-    out: Annotated[Path | None, typer.Option(help="Folder [NAME_debug next to the input].")] = None,
+    out: Annotated[
+        Path | None, typer.Option(help="Folder (default: NAME_debug next to the input).")
+    ] = None,
     calibration: Annotated[
         str, typer.Option(help="Calibration JSON, or 'none' to skip undistortion.")
     ] = str(default_calibration_path()),
-    model: Annotated[Path | None, typer.Option(help="Vehicle model file [shipped].")] = None,
+    model: Annotated[
+        Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
+    ] = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -241,7 +250,9 @@ def train_command(
 @cli.command("evaluate-classifier")
 def evaluate_classifier_command(
     data: Annotated[Path, typer.Option(help="Folder with vehicles/ and non-vehicles/ patches.")],
-    model: Annotated[Path | None, typer.Option(help="Model file [the shipped one].")] = None,
+    model: Annotated[
+        Path | None, typer.Option(help="Model file (default: the shipped one).")
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Accuracy, precision and recall of the classifier on folders of patches of any size."""
