@@ -188,6 +188,8 @@ def compose(
         if isinstance(lane_result, LaneResult) and (p := lane_inset(lane_result)) is not None:
             pictures.append(p)
         if isinstance(vehicle_result, VehicleResult) and vehicle_result.debug is not None:
-            pictures.append(heat_picture(vehicle_result.debug.history_heat, 2.5))
+            pictures.append(
+                heat_picture(vehicle_result.debug.history_heat, vehicle_result.debug.heat_threshold)
+            )
         draw_insets(out, pictures)
     return out

@@ -93,8 +93,8 @@ def intermediates(
                 2,
             )
         pictures["window_hits"] = hits
-        pictures["heat_frame"] = heat_picture(d.frame_heat, 2.5)
-        pictures["heat_history"] = heat_picture(d.history_heat, 2.5)
+        pictures["heat_frame"] = heat_picture(d.frame_heat, d.heat_threshold)
+        pictures["heat_history"] = heat_picture(d.history_heat, d.heat_threshold)
         pictures["regions"] = _boxes(out.undistorted, d.regions, (255, 255, 0))
         pictures["tracks"] = _boxes(out.undistorted, vehicles.detections, (255, 60, 60))
     pictures["composite"] = composite

@@ -118,9 +118,7 @@ def naive_detector_ms(clip: Path, frames: int = 2) -> dict[str, float]:
         t0 = time.perf_counter()
         n_windows = 0
         for band in detector.config.bands:
-            x0, y0, x1, y1, scale = band_geometry(
-                band, info.size, cfg.patch_size, cfg.pixels_per_cell
-            )
+            x0, y0, x1, y1, scale = band_geometry(band, info.size, cfg.patch_size)
             step = scale * cfg.pixels_per_cell * band.step_cells
             win = scale * cfg.patch_size
             # Windows inside the frame only (the dense search also pads past the side edges).

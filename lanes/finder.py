@@ -18,7 +18,7 @@ from lanes.search import (
     evaluate_fit,
     fit_lane,
     fit_line,
-    histogram_bases,
+    histogram_base,
     prior_search,
     window_search,
 )
@@ -144,7 +144,7 @@ class LaneFinder:
         if prior is not None:
             hint = float(evaluate_fit(prior, bh))
         spread = 0.35 * (cfg.dst_right_x - cfg.dst_left_x) * view.size[0]
-        side_hint = histogram_bases(mask, hint, hint, spread)[0]
+        side_hint = histogram_base(mask, hint, spread)
         return window_search(
             mask,
             side_hint,

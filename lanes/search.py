@@ -38,19 +38,13 @@ def evaluate_fit(fit: Fit, y: NDArray[Any] | float) -> NDArray[np.float64]:
     return np.asarray(np.polyval(fit, y), dtype=np.float64)
 
 
-def histogram_bases(
-    mask: NDArray[np.uint8], left_hint: float, right_hint: float, spread: float
-) -> tuple[float, float]:
-    """Columns of the strongest paint in the lower half, near where each line is expected."""
+def histogram_base(mask: NDArray[np.uint8], hint: float, spread: float) -> float:
+    """Column of the strongest paint in the lower half near where the line is expected."""
     h, w = mask.shape
     column_sum = mask[h // 2 :].sum(axis=0).astype(np.float64)
-    xs = np.arange(w)
-    bases = []
-    for hint in (left_hint, right_hint):
-        # Prefer peaks near the expected column: weight falls off over `spread` pixels.
-        weighted = column_sum * np.exp(-(((xs - hint) / spread) ** 2))
-        bases.append(float(np.argmax(weighted)) if weighted.max() > 0 else hint)
-    return bases[0], bases[1]
+    # Prefer peaks near the expected column: weight falls off over `spread` pixels.
+    weighted = column_sum * np.exp(-(((np.arange(w) - hint) / spread) ** 2))
+    return float(np.argmax(weighted)) if weighted.max() > 0 else hint
 
 
 def window_search(

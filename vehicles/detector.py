@@ -24,6 +24,7 @@ class VehicleDebug:
     frame_heat: NDArray[np.float32]
     history_heat: NDArray[np.float32]
     regions: Detections
+    heat_threshold: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,7 +108,7 @@ class VehicleDetector:
         regions = Detections.from_boxes(region_boxes[big], scores)
         shown = self.tracker.update(regions)
         debug = (
-            VehicleDebug(hits, frame_heat, self.heatmap.combined, regions)
+            VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat_threshold)
             if self.keep_debug
             else None
         )

@@ -90,7 +90,7 @@ class BandHits:
 
 
 def band_geometry(
-    band: Band, frame_size: tuple[int, int], patch: int, cell: int
+    band: Band, frame_size: tuple[int, int], patch: int
 ) -> tuple[int, int, int, int, float]:
     """(x0, y0, x1, y1) of the band in the frame and its scale (window px / patch px)."""
     w, h = frame_size
@@ -107,7 +107,7 @@ def search_band(frame: NDArray[np.uint8], band: Band, weights: LinearWeights) ->
     """Score every window of one band (HOG computed once for the band at its scale)."""
     cfg = weights.config
     h, w = frame.shape[:2]
-    x0, y0, x1, y1, scale = band_geometry(band, (w, h), cfg.patch_size, cfg.pixels_per_cell)
+    x0, y0, x1, y1, scale = band_geometry(band, (w, h), cfg.patch_size)
     # A band may reach past the side edges so cars entering the frame are covered: pad by
     # replicating the border column.
     pad_left, pad_right = max(0, -x0), max(0, x1 - w)
