@@ -18,8 +18,8 @@ class LaneConfig:
     src_bottom_left_x: float = 0.2047
     src_bottom_right_x: float = 0.8203
     # Bird's-eye image: size as fractions of the frame, lane lines mapped to these columns.
-    warp_width: float = 0.625
-    warp_height: float = 0.5
+    warp_width: float = 0.4
+    warp_height: float = 0.3
     dst_left_x: float = 0.3
     dst_right_x: float = 0.7
     # World scale: a US lane is 3.7 m wide; dashes are 3 m long (sets metres per warped row).
@@ -31,14 +31,18 @@ class LaneConfig:
     white_min_l: float = 120.0
     yellow_tophat: float = 7.0
     yellow_min_b: float = 140.0
-    min_paint_rows: int = 7  # paint is kept where it runs at least this many bird's-eye rows
+    min_paint_m: float = 0.5  # paint is kept where it runs along the road at least this far
     # Search.
     windows: int = 9
     window_margin_m: float = 0.55
     prior_margin_m: float = 0.45
-    min_window_pixels: int = 30
-    min_line_pixels: int = 150
-    width_change_prior: float = 5.0  # weight pulling the lane's width change to the last one
+    # Paint needed (m^2 of road; a 15 cm line gives 0.15 m^2 per metre): to re-centre a window,
+    # and to fit a line at all.
+    min_window_paint_m2: float = 0.026
+    min_line_paint_m2: float = 0.13
+    # Weak pulls towards the last frames (relative to each side's pixels weighing 1 in total):
+    heading_prior: float = 0.01  # the lane centre's direction at the bottom row
+    near_width_prior: float = 0.2  # the lane width at the bottom row, in pixels
     outlier_m: float = 0.25  # pixels farther than this from a first fit are dropped, then refit
     # History and sanity checks.
     history: int = 3

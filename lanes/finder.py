@@ -14,6 +14,7 @@ from lanes.measure import lane_offset, lane_widths, radius_of_curvature
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.search import (
     Fit,
+    LanePrior,
     LinePixels,
     evaluate_fit,
     fit_lane,
@@ -99,32 +100,17 @@ class LaneFinder:
         view = self.view((frame.shape[1], frame.shape[0]))
         bw, bh = view.size
         birdseye = view.warp(frame)
-        mask = lane_mask(birdseye, cfg, view.xm_per_px)
+        mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px)
         hints = (cfg.dst_left_x * bw, cfg.dst_right_x * bw)
         pixels = [
             self._find(mask, line, hint, view)
             for line, hint in zip((self.left, self.right), hints, strict=True)
         ]
-        enough = [len(p) >= cfg.min_line_pixels for p in pixels]
+        enough = [len(p) >= view.pixels_for(cfg.min_line_paint_m2) for p in pixels]
         fits: list[Fit | None]
         if all(enough):
-            previous = (self.left.smoothed, self.right.smoothed)
-            # A dash gap near the camera leaves the width change loose: hold it to the last one.
-            near_gap = min(int((p.y > 2 * bh / 3).sum()) for p in pixels) < cfg.min_window_pixels
-            spread = (
-                None
-                if not near_gap or previous[0] is None or previous[1] is None
-                else float(previous[1][1] - previous[0][1])
-            )
             fits = list(
-                fit_lane(
-                    pixels[0],
-                    pixels[1],
-                    bh,
-                    cfg.outlier_m / view.xm_per_px,
-                    spread,
-                    cfg.width_change_prior,
-                )
+                fit_lane(pixels[0], pixels[1], bh, cfg.outlier_m / view.xm_per_px, self._prior(bh))
             )
         else:
             fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
@@ -133,13 +119,25 @@ class LaneFinder:
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1], status) if self.keep_debug else None
         return LaneResult(lane, debug, status)
 
+    def _prior(self, rows: int) -> LanePrior | None:
+        """Heading and near width of the smoothed lane, if both lines have history."""
+        left, right = self.left.smoothed, self.right.smoothed
+        if left is None or right is None:
+            return None
+        return LanePrior(
+            heading=float(np.mean([2 * f[0] * rows + f[1] for f in (left, right)])),
+            near_width=float(evaluate_fit(right, rows) - evaluate_fit(left, rows)),
+            heading_weight=self.config.heading_prior,
+            near_width_weight=self.config.near_width_prior,
+        )
+
     def _find(self, mask: NDArray[np.uint8], line: Line, hint: float, view: BirdsEye) -> LinePixels:
         cfg = self.config
         bh = view.size[1]
         prior = line.smoothed
         if line.trusted and prior is not None:
             found = prior_search(mask, prior, int(cfg.prior_margin_m / view.xm_per_px))
-            if len(found) >= cfg.min_line_pixels:
+            if len(found) >= view.pixels_for(cfg.min_line_paint_m2):
                 return found
         if prior is not None:
             hint = float(evaluate_fit(prior, bh))
@@ -150,7 +148,7 @@ class LaneFinder:
             side_hint,
             cfg.windows,
             int(cfg.window_margin_m / view.xm_per_px),
-            cfg.min_window_pixels,
+            view.pixels_for(cfg.min_window_paint_m2),
         )
 
     def _check_and_update(

@@ -29,6 +29,10 @@ class BirdsEye:
             cv2.warpPerspective(image, self.matrix, self.size, flags=cv2.INTER_LINEAR)
         )
 
+    def pixels_for(self, area_m2: float) -> int:
+        """How many bird's-eye pixels cover `area_m2` of road (at least 1)."""
+        return max(1, round(area_m2 / (self.xm_per_px * self.ym_per_px)))
+
     def to_frame(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
         """Bird's-eye (x, y) points mapped to the undistorted frame."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)

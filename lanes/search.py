@@ -81,19 +81,33 @@ def prior_search(mask: NDArray[np.uint8], prior: Fit, margin: int) -> LinePixels
     return LinePixels(xs[inside].astype(np.float64), ys[inside].astype(np.float64))
 
 
+@dataclass(frozen=True)
+class LanePrior:
+    """What the last frames say about the lane, to steady a fit where the paint is thin.
+
+    heading: slope dx/dy of the lane's centre at the bottom row; the car turns slowly.
+    near_width: lane width in pixels at the bottom row, which pitch changes least.
+    """
+
+    heading: float
+    near_width: float
+    heading_weight: float
+    near_width_weight: float
+
+
 def fit_lane(
     left: LinePixels,
     right: LinePixels,
     rows: float,
     outlier_px: float,
-    prior_spread: float | None = None,
-    prior_weight: float = 0.0,
+    prior: LanePrior | None = None,
 ) -> tuple[Fit, Fit]:
     """Fit both lines at once: shared curvature and heading, own position, a linear width change.
 
     left:  x = a y^2 + (b - e/2) y + (c - d/2);  right: x = a y^2 + (b + e/2) y + (c + d/2).
     Lane lines are parallel on the road, so a solid line steadies the fit of a dashed one. Each
-    side weighs the same in total (near rows more), and one pass drops outlying pixels.
+    side weighs the same in total (near rows more), and one pass drops outlying pixels. A prior
+    adds two weak pseudo-observations, so a dash gap near the camera cannot swing the near end.
     """
     ys = np.concatenate([left.y, right.y])
     xs = np.concatenate([left.x, right.x])
@@ -103,17 +117,19 @@ def fit_lane(
     )
     weights *= 0.5 + ys / rows
     design = np.stack([ys**2, ys, np.ones_like(ys), side, side * ys], axis=1)
+    if prior is not None:
+        # rows * centre slope at the bottom = rows * heading;  width at the bottom = near_width.
+        prior_rows = np.array([[2 * rows**2, rows, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0, rows]])
+        prior_targets = np.array([rows * prior.heading, prior.near_width])
+        prior_sw = np.sqrt([prior.heading_weight, prior.near_width_weight])
     keep = np.ones(len(ys), bool)
     params = np.zeros(5)
-    # A pseudo-observation rows * (e - e_prior) = 0 pulls the width change towards the prior.
-    prior_row = np.array([[0.0, 0.0, 0.0, 0.0, rows]]) * np.sqrt(prior_weight)
-    prior_target = np.array([rows * (prior_spread or 0.0)]) * np.sqrt(prior_weight)
-    use_prior = prior_spread is not None and prior_weight > 0
     for _ in range(2):
         sw = np.sqrt(weights[keep])
         a_mat, b_vec = design[keep] * sw[:, None], xs[keep] * sw
-        if use_prior:
-            a_mat, b_vec = np.vstack([a_mat, prior_row]), np.concatenate([b_vec, prior_target])
+        if prior is not None:
+            a_mat = np.vstack([a_mat, prior_rows * prior_sw[:, None]])
+            b_vec = np.concatenate([b_vec, prior_targets * prior_sw])
         params = np.linalg.lstsq(a_mat, b_vec, rcond=None)[0]
         keep = np.abs(design @ params - xs) < outlier_px
         if keep.sum() < 10:

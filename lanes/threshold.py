@@ -22,9 +22,9 @@ def tophat_kernel(line_width_px: float) -> NDArray[np.uint8]:
 
 
 def lane_mask(
-    birdseye_rgb: NDArray[np.uint8], config: LaneConfig, xm_per_px: float
+    birdseye_rgb: NDArray[np.uint8], config: LaneConfig, xm_per_px: float, ym_per_px: float
 ) -> NDArray[np.uint8]:
-    """1 where a pixel looks like white or yellow lane paint, else 0."""
+    """1 where a pixel looks like white or yellow lane paint, else 0; sizes are set in metres."""
     lab = cv2.cvtColor(birdseye_rgb, cv2.COLOR_RGB2LAB)
     lightness, yellowness = lab[:, :, 0], lab[:, :, 2]
     kernel = tophat_kernel(config.line_width_m / xm_per_px)
@@ -34,6 +34,5 @@ def lane_mask(
     yellow = (yellow_contrast > config.yellow_tophat) & (yellowness > config.yellow_min_b)
     mask = np.asarray(white | yellow, dtype=np.uint8)
     # Paint runs along the road: a vertical opening drops the flat speckles of concrete texture.
-    return np.asarray(
-        cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((config.min_paint_rows, 1), np.uint8))
-    )
+    rows = max(1, round(config.min_paint_m / ym_per_px))
+    return np.asarray(cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((rows, 1), np.uint8)))
