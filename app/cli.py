@@ -12,6 +12,7 @@ from typing import Annotated
 import typer
 
 from app.errors import InputError
+from app.runtime import tune_process
 from app.stages import StageResult
 from app.video import Frame
 from camera_cal import (
@@ -139,22 +140,24 @@ def process_command(
         raise InputError("output would overwrite the input; choose another -o")
     still = is_image(source)
     stages = build_stages(lanes, vehicles, model, keep_debug=insets, still=still)
-    pipeline = Pipeline(cal, stages=stages)
     options = ComposeOptions(insets=insets)
 
     def compositor(frame: Frame, results: Mapping[str, StageResult], fps: float) -> Frame:
         return compose(frame, results, fps, options)
 
     if still:
-        summary = process_still(
-            source, output, pipeline, record, compositor, log=lambda m: typer.echo(m, err=True)
-        )
+        with Pipeline(cal, stages=stages) as pipeline:
+            summary = process_still(
+                source, output, pipeline, record, compositor, log=lambda m: typer.echo(m, err=True)
+            )
     else:
         if is_image(output):
             raise InputError(
                 f"output {output} is an image name but the input is a video; use an .mp4 name"
             )
-        summary = process_video(source, output, pipeline, record, compositor, start, end)
+        # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
+        with Pipeline(cal, stages=stages, workers=True) as pipeline:
+            summary = process_video(source, output, pipeline, record, compositor, start, end)
     typer.echo(
         f"wrote {summary.output} ({summary.frames} frames, {summary.fps:.1f} fps)"
         + (f" and {summary.record}" if summary.record else "")
@@ -285,6 +288,7 @@ def evaluate_classifier_command(
 
 def main() -> None:
     """Entry point: run the CLI, turning expected failures into one line and a non-zero exit."""
+    tune_process()
     try:
         cli()
     except USER_ERRORS as error:

@@ -6,8 +6,8 @@ import contextlib
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +20,7 @@ from app.progress import Progress
 from app.record import frame_record, write_record_line
 from app.stages import FrameStage, StageResult
 from app.video import Frame, VideoWriter, probe_video, read_frames, read_image, write_image
+from app.workers import StageWorker
 from camera_cal import Calibration, CalibrationError, Undistorter, build_undistorter
 
 Compositor = Callable[[Frame, Mapping[str, StageResult], float], Frame]
@@ -42,21 +43,37 @@ class FrameOutput:
 class Pipeline:
     """Undistorts frames of one size and runs the stages on them.
 
-    The stages are independent of each other (each sees the undistorted frame), so with
-    `parallel` all but the first run in worker threads while the first runs in the caller's.
+    The stages are independent of each other (each sees the undistorted frame). With `workers`,
+    every stage but the first runs in a child process (started by the first `prepare`), and
+    `stream` keeps one frame in flight so the children work while this process does the rest.
+    Use it as a context manager, or call `close`, to stop the children.
     """
 
     def __init__(
-        self, calibration: Calibration | None, stages: Sequence[FrameStage], parallel: bool = True
+        self, calibration: Calibration | None, stages: Sequence[FrameStage], workers: bool = False
     ) -> None:
         self.calibration = calibration
         self.stages = list(stages)
         self._undistorter: Undistorter | None = None
-        self._pool = (
-            ThreadPoolExecutor(max_workers=len(stages) - 1)
-            if parallel and len(stages) > 1
-            else None
-        )
+        self._want_workers = workers and len(self.stages) > 1
+        self._workers: list[StageWorker] = []
+
+    def __enter__(self) -> Pipeline:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the worker processes, if any."""
+        for worker in self._workers:
+            worker.close()
+        self._workers = []
+
+    @property
+    def _local(self) -> list[FrameStage]:
+        """The stages run in this process."""
+        return self.stages[:1] if self._workers else self.stages
 
     def prepare(self, size: tuple[int, int]) -> None:
         """Build the undistortion maps for frames of `size` and reset stage history."""
@@ -66,8 +83,16 @@ class Pipeline:
                 self._undistorter = build_undistorter(self.calibration, size)
             except CalibrationError as error:
                 raise InputError(str(error)) from None
-        for stage in self.stages:
+        frame_bytes = size[0] * size[1] * 3
+        if self._workers and self._workers[0].frame_bytes < frame_bytes:
+            self.close()  # a larger frame than the slots hold: start over
+        for stage in self._local:
             stage.reset()
+        for worker in self._workers:
+            worker.reset()
+        if self._want_workers and not self._workers:
+            # Forked now, before any reader/writer thread exists, with fresh stage history.
+            self._workers = [StageWorker(stage, frame_bytes) for stage in self.stages[1:]]
 
     def undistort(self, frame: Frame) -> Frame:
         """The undistorted frame (or the frame itself with no calibration)."""
@@ -80,25 +105,38 @@ class Pipeline:
 
     def run(self, frame: Frame) -> FrameOutput:
         """Undistort one frame and pass it through every stage."""
+        return self._finish(self._start(frame))
+
+    def stream(self, frames: Iterator[Frame]) -> Iterator[FrameOutput]:
+        """Every frame's output, in order; with workers, one frame is in flight meanwhile."""
+        lag = 1 if self._workers else 0
+        pending: deque[FrameOutput] = deque()
+        for frame in frames:
+            pending.append(self._start(frame))
+            if len(pending) > lag:
+                yield self._finish(pending.popleft())
+        while pending:
+            yield self._finish(pending.popleft())
+
+    def _start(self, frame: Frame) -> FrameOutput:
+        """Undistort, hand the frame to the workers, and run the local stages."""
         t0 = time.perf_counter()
         undistorted = self.undistort(frame)
-        timings = {"undistort": (time.perf_counter() - t0) * 1000}
-
-        def timed(stage: FrameStage) -> tuple[StageResult, float]:
+        out = FrameOutput(undistorted, {}, {"undistort": (time.perf_counter() - t0) * 1000})
+        for worker in self._workers:
+            worker.submit(undistorted)
+        for stage in self._local:
             t0 = time.perf_counter()
-            result = stage.process(undistorted)
-            return result, (time.perf_counter() - t0) * 1000
+            out.results[stage.record_key] = stage.process(undistorted)
+            out.timings_ms[stage.record_key] = (time.perf_counter() - t0) * 1000
+        return out
 
-        if self._pool is not None:
-            futures = [self._pool.submit(timed, stage) for stage in self.stages[1:]]
-            outcomes = [timed(self.stages[0])] + [f.result() for f in futures]
-        else:
-            outcomes = [timed(stage) for stage in self.stages]
-        results: dict[str, StageResult] = {}
-        for stage, (result, ms) in zip(self.stages, outcomes, strict=True):
-            results[stage.record_key] = result
-            timings[stage.record_key] = ms
-        return FrameOutput(undistorted=undistorted, results=results, timings_ms=timings)
+    def _finish(self, out: FrameOutput) -> FrameOutput:
+        """Add the workers' results for this frame, in stage order."""
+        for worker in self._workers:
+            out.results[worker.record_key], out.timings_ms[worker.record_key] = worker.collect()
+        out.results = {s.record_key: out.results[s.record_key] for s in self.stages}
+        return out
 
 
 def prefetch(frames: Iterator[Frame], depth: int = 4) -> Iterator[Frame]:
@@ -188,9 +226,9 @@ def process_video(
             audio_end_s=last / info.fps if end_s is not None else None,
         )
         try:
-            for offset, frame in enumerate(prefetch(read_frames(source, info, first, last))):
+            decoded = prefetch(read_frames(source, info, first, last))
+            for offset, out in enumerate(pipeline.stream(decoded)):
                 index = first + offset
-                out = pipeline.run(frame)
                 writer.write(compositor(out.undistorted, out.results, progress.fps))
                 if handle is not None:
                     write_record_line(handle, frame_record(index, index / info.fps, out.results))

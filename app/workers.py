@@ -1,0 +1,132 @@
+"""A frame stage run in a child process, so it works beside the rest of the pipeline.
+
+The stages are numpy/OpenCV code that holds Python's GIL often enough that two of them in
+threads of one process run little faster than one after the other (measured). A forked child
+has its own interpreter: the caller submits a frame, does its own work, and collects the result
+later. The stage (and its loaded model) is inherited by the fork, so nothing is re-loaded.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import mmap
+import multiprocessing
+import signal
+import time
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.stages import FrameStage, StageResult
+
+
+class WorkerError(RuntimeError):
+    """The child process died or answered out of turn."""
+
+
+def _serve(stage: FrameStage, conn: Connection, slots: list[mmap.mmap]) -> None:
+    """Child loop: frames in, (result, ms) out; errors are sent back instead of raised."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    while True:
+        try:
+            command, argument = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            if command == "frame":
+                slot, shape = argument
+                # A private copy: the parent refills the slot once this frame is collected.
+                frame = np.frombuffer(slots[slot], np.uint8, int(np.prod(shape))).reshape(shape)
+                frame = frame.copy()
+                t0 = time.perf_counter()
+                result = stage.process(frame)
+                conn.send(("ok", (result, (time.perf_counter() - t0) * 1000)))
+            elif command == "reset":
+                stage.reset()
+                conn.send(("ok", None))
+            else:
+                return
+        except Exception as error:  # handed to the parent, which raises it
+            try:
+                conn.send(("error", error))
+            except Exception:  # the error itself does not pickle
+                conn.send(("error", WorkerError(f"{type(error).__name__}: {error}")))
+
+
+class StageWorker:
+    """One stage in a forked child: `submit` a frame, then `collect` its result, in order.
+
+    Frames travel through shared-memory slots (a pipe would block the sender until the child
+    reads), so up to `slots` frames can be in flight.
+    """
+
+    def __init__(self, stage: FrameStage, frame_bytes: int, slots: int = 2) -> None:
+        self.record_key = stage.record_key
+        self.frame_bytes = frame_bytes
+        # Anonymous shared maps made before the fork are shared with the child.
+        self._slots = [mmap.mmap(-1, max(1, frame_bytes)) for _ in range(slots)]
+        context = multiprocessing.get_context("fork")
+        self._conn, child = context.Pipe()
+        self._process = context.Process(
+            target=_serve,
+            args=(stage, child, self._slots),
+            name=f"roadview-{stage.record_key}",
+            daemon=True,
+        )
+        self._process.start()
+        child.close()
+        self._pending = 0
+        self._submitted = 0
+
+    def submit(self, frame: NDArray[np.uint8]) -> None:
+        """Hand over one frame; the child starts on it as soon as it is free."""
+        if self._pending >= len(self._slots):
+            raise WorkerError(f"more than {len(self._slots)} frames in flight")
+        if frame.nbytes > self.frame_bytes:
+            raise WorkerError(f"frame of {frame.nbytes} bytes; slots hold {self.frame_bytes}")
+        slot = self._submitted % len(self._slots)
+        view = np.frombuffer(self._slots[slot], np.uint8, frame.size).reshape(frame.shape)
+        view[...] = frame
+        self._conn.send(("frame", (slot, frame.shape)))
+        self._pending += 1
+        self._submitted += 1
+
+    def collect(self) -> tuple[StageResult, float]:
+        """The oldest submitted frame's result and the ms the stage spent on it."""
+        if self._pending == 0:
+            raise WorkerError("collect() without a submitted frame")
+        self._pending -= 1
+        result: tuple[StageResult, float] = self._answer()
+        return result
+
+    def reset(self) -> None:
+        """Forget the stage's history (waits for frames still in flight)."""
+        while self._pending:
+            self.collect()
+        self._conn.send(("reset", None))
+        self._answer()
+
+    def close(self) -> None:
+        """Stop the child (it also dies with the parent: it is a daemon)."""
+        with contextlib.suppress(OSError, ValueError):
+            self._conn.send(("stop", None))
+        self._conn.close()
+        self._process.join(timeout=2)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+        for slot in self._slots:
+            slot.close()
+
+    def _answer(self) -> Any:
+        try:
+            status, value = self._conn.recv()
+        except (EOFError, OSError):
+            raise WorkerError(
+                f"the {self.record_key} worker process died (exit code {self._process.exitcode})"
+            ) from None
+        if status == "error":
+            raise value
+        return value
