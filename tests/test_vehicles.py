@@ -130,5 +130,6 @@ def test_test_video_vehicles(data_dir: Path, tmp_path: Path) -> None:
     v = scores["vehicles"]["iou_0.5"]
     assert v["precision"] >= 0.95 and v["recall"] >= 0.90
     assert v["false_positives_per_frame"] <= 0.05
+    assert v["mean_iou"] >= 0.75  # boxes as tight as the labels, not just overlapping
     ids = {d["id"] for r in records[10:] for d in r["vehicles"]}
     assert len(ids) == 2  # the two cars keep one id each through the clip

@@ -39,6 +39,13 @@ class VehicleResult:
         return self.detections.to_record()
 
 
+def footprint(boxes: NDArray[np.float64], share: tuple[float, float]) -> NDArray[np.float64]:
+    """Boxes shrunk about their centres to `share` of their (width, height)."""
+    centre = (boxes[:, :2] + boxes[:, 2:]) / 2
+    half = (boxes[:, 2:] - boxes[:, :2]) / 2 * np.asarray(share)
+    return np.concatenate([centre - half, centre + half], axis=1)
+
+
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -96,7 +103,7 @@ class VehicleDetector:
         strong = proba >= cfg.min_probability
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
-        frame_heat = self.heatmap.add((w, h), boxes[strong], weight)
+        frame_heat = self.heatmap.add((w, h), footprint(boxes[strong], cfg.heat_footprint), weight)
         region_boxes, peaks = self.heatmap.regions(cfg.peak_fraction, cfg.split_valley)
         big = (
             np.minimum(
