@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from app.errors import InputError
+from vehicles.detections import iou_matrix
 
 Box = tuple[float, float, float, float]
 LANE_ROWS = (670, 630, 590, 550, 510, 470)
@@ -93,11 +94,7 @@ def _interpolate(a: FrameLabels, b: FrameLabels, t: float) -> FrameLabels:
 
 def iou(a: Sequence[float], b: Sequence[float]) -> float:
     """Intersection over union of two [x1, y1, x2, y2] boxes."""
-    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
-    inter = ix * iy
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return inter / union if union > 0 else 0.0
+    return float(iou_matrix(np.asarray([a], np.float64), np.asarray([b], np.float64))[0, 0])
 
 
 @dataclass(frozen=True)
@@ -114,8 +111,12 @@ def match_frame(
     detections: Sequence[Sequence[float]], truth: Sequence[LabelledVehicle], threshold: float
 ) -> FrameMatch:
     """Greedy matching by IoU; a detection matched to an ignored vehicle counts neither way."""
+    ious = iou_matrix(
+        np.asarray(detections, np.float64).reshape(-1, 4),
+        np.asarray([t.box for t in truth], np.float64).reshape(-1, 4),
+    )
     pairs = sorted(
-        ((iou(d, t.box), i, j) for i, d in enumerate(detections) for j, t in enumerate(truth)),
+        ((float(ious[i, j]), i, j) for i in range(len(detections)) for j in range(len(truth))),
         reverse=True,
     )
     used_d: set[int] = set()

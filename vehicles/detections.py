@@ -1,4 +1,4 @@
-"""`Detections`: the value passed between the detector's stages (boxes, scores, track ids)."""
+"""`Detections`: the value passed between the detector's stages (boxes, scores, track ids), and box IoU."""
 
 from __future__ import annotations
 
@@ -43,3 +43,19 @@ class Detections:
             {"id": int(i), "box": [round(float(v), 1) for v in box], "score": round(float(s), 3)}
             for box, s, i in zip(self.boxes, self.scores, self.ids, strict=True)
         ]
+
+
+def iou_matrix(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Pairwise IoU of two sets of [x1, y1, x2, y2] boxes."""
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros((len(a), len(b)))
+    ix = np.clip(
+        np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None
+    )
+    iy = np.clip(
+        np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None
+    )
+    inter = ix * iy
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    return np.asarray(inter / np.maximum(area_a[:, None] + area_b[None, :] - inter, 1e-9))
