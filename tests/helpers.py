@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 from app.video import VideoInfo, probe_video, read_frames
 
@@ -34,3 +36,16 @@ def count_frames(path: Path) -> tuple[VideoInfo, int]:
     """Container info and the number of frames actually decoded."""
     info = probe_video(path)
     return info, sum(1 for _ in read_frames(path, info))
+
+
+def read_record(path: Path) -> list[dict[str, Any]]:
+    """The per-frame objects of a `--json` record."""
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def process_clip(video: Path, folder: Path, *options: str) -> list[dict[str, Any]]:
+    """`roadview process VIDEO` into `folder` with a record; asserts success, returns the record."""
+    record = folder / "r.jsonl"
+    result = run_cli("process", video, "-o", folder / "o.mp4", "--json", record, *options)
+    assert result.returncode == 0, result.stderr
+    return read_record(record)

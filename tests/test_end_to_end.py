@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from app.video import ffmpeg_binary, probe_video, read_frames
-from tests.helpers import assert_one_line_error, count_frames, run_cli
+from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,7 @@ def test_other_camera_with_calibration_none(clips: dict[str, Path], tmp_path: Pa
     )
     assert result.returncode == 0, result.stderr
     assert count_frames(out)[0].size == (960, 540)
-    lanes = [json.loads(line)["lane"] for line in record.read_text().splitlines()]
+    lanes = [r["lane"] for r in read_record(record)]
     assert all(lane is not None for lane in lanes)
     # The lane is found at 960x540 as at 1280x720: left line in the left half, right in the right.
     assert lanes[-1]["left"][0][0] < 480 < lanes[-1]["right"][0][0]
@@ -201,7 +201,7 @@ def test_start_end_and_frame_numbers(test_video: Path, tmp_path: Path) -> None:
         "process", test_video, "-o", out, "--json", record, "--start", "0.4", "--end", "1.0"
     )
     assert result.returncode == 0, result.stderr
-    frames = [json.loads(line)["frame"] for line in record.read_text().splitlines()]
+    frames = [r["frame"] for r in read_record(record)]
     assert frames == list(range(10, 25))
     assert count_frames(out)[1] == 15
     first = next(read_frames(out, probe_video(out)))

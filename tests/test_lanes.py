@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
@@ -16,7 +15,7 @@ from lanes.line import Line
 from lanes.measure import radius_of_curvature
 from lanes.perspective import birdseye_for
 from lanes.search import LinePixels, fit_lane, fit_line
-from tests.helpers import run_cli
+from tests.helpers import process_clip
 
 
 def _still(data_dir: Path, name: str) -> np.ndarray:
@@ -115,18 +114,7 @@ def test_finder_rejects_an_implausible_frame(data_dir: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("clip", ["test_video", "project_cut_1", "project_cut_2"])
 def test_labelled_clips_lane_accuracy(data_dir: Path, tmp_path: Path, clip: str) -> None:
-    record = tmp_path / "r.jsonl"
-    result = run_cli(
-        "process",
-        data_dir / "videos" / f"{clip}.mp4",
-        "-o",
-        tmp_path / "o.mp4",
-        "--json",
-        record,
-        "--no-vehicles",
-    )
-    assert result.returncode == 0, result.stderr
-    records = [json.loads(line) for line in record.read_text().splitlines()]
+    records = process_clip(data_dir / "videos" / f"{clip}.mp4", tmp_path, "--no-vehicles")
     assert all(r["lane"] is not None for r in records)  # every frame has a drawn lane
     scores = evaluate(load_labels(data_dir / "labels" / f"{clip}.json"), records)["lane"]
     assert scores["missing"] == 0

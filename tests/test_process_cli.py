@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tests.helpers import assert_one_line_error, count_frames, run_cli
+from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
 
 def test_help_lists_the_commands() -> None:
@@ -29,7 +29,7 @@ def test_process_video_keeps_frames_size_rate_and_writes_a_record(
     assert frames == source_frames == 38
     assert info.size == source_info.size and info.fps == source_info.fps
     assert info.has_audio == source_info.has_audio
-    lines = [json.loads(line) for line in record.read_text().splitlines()]
+    lines = read_record(record)
     assert [r["frame"] for r in lines] == list(range(38))
     assert lines[25]["time_s"] == 1.0
     assert all(set(r) >= {"frame", "time_s", "vehicles", "lane"} for r in lines)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import zipfile
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 
 from app.evaluate import evaluate, iou, load_labels
-from tests.helpers import run_cli
+from tests.helpers import process_clip
 from vehicles.config import Band, DetectorConfig
 from vehicles.detections import Detections
 from vehicles.detector import VehicleDetector
@@ -114,18 +113,7 @@ def test_track_ids_stay_constant_on_a_moving_box() -> None:
 
 @pytest.mark.slow
 def test_test_video_vehicles(data_dir: Path, tmp_path: Path) -> None:
-    record = tmp_path / "r.jsonl"
-    result = run_cli(
-        "process",
-        data_dir / "videos" / "test_video.mp4",
-        "-o",
-        tmp_path / "o.mp4",
-        "--json",
-        record,
-        "--no-lanes",
-    )
-    assert result.returncode == 0, result.stderr
-    records = [json.loads(line) for line in record.read_text().splitlines()]
+    records = process_clip(data_dir / "videos" / "test_video.mp4", tmp_path, "--no-lanes")
     scores = evaluate(load_labels(data_dir / "labels" / "test_video.json"), records)
     v = scores["vehicles"]["iou_0.5"]
     assert v["precision"] >= 0.95 and v["recall"] >= 0.90

@@ -1,4 +1,4 @@
-"""`Detections`: the value passed between the detector's stages (boxes, scores, track ids), and box IoU."""
+"""`Detections`, the value passed between the detector's stages, and the IoU of boxes."""
 
 from __future__ import annotations
 
