@@ -16,6 +16,7 @@ from lanes.search import (
     Fit,
     LanePrior,
     LinePixels,
+    Paint,
     evaluate_fit,
     fit_lane,
     fit_line,
@@ -101,9 +102,10 @@ class LaneFinder:
         bw, bh = view.size
         birdseye = view.warp(frame)
         mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px)
+        paint = Paint.of(mask)
         hints = (cfg.dst_left_x * bw, cfg.dst_right_x * bw)
         pixels = [
-            self._find(mask, line, hint, view)
+            self._find(paint, line, hint, view)
             for line, hint in zip((self.left, self.right), hints, strict=True)
         ]
         enough = [len(p) >= view.pixels_for(cfg.min_line_paint_m2) for p in pixels]
@@ -131,20 +133,20 @@ class LaneFinder:
             near_width_weight=self.config.near_width_prior,
         )
 
-    def _find(self, mask: NDArray[np.uint8], line: Line, hint: float, view: BirdsEye) -> LinePixels:
+    def _find(self, paint: Paint, line: Line, hint: float, view: BirdsEye) -> LinePixels:
         cfg = self.config
         bh = view.size[1]
         prior = line.smoothed
         if line.trusted and prior is not None:
-            found = prior_search(mask, prior, int(cfg.prior_margin_m / view.xm_per_px))
+            found = prior_search(paint, prior, int(cfg.prior_margin_m / view.xm_per_px))
             if len(found) >= view.pixels_for(cfg.min_line_paint_m2):
                 return found
         if prior is not None:
             hint = float(evaluate_fit(prior, bh))
         spread = 0.35 * (cfg.dst_right_x - cfg.dst_left_x) * view.size[0]
-        side_hint = histogram_base(mask, hint, spread)
+        side_hint = histogram_base(paint.mask, hint, spread)
         return window_search(
-            mask,
+            paint,
             side_hint,
             cfg.windows,
             int(cfg.window_margin_m / view.xm_per_px),

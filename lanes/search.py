@@ -23,6 +23,21 @@ class LinePixels:
         return len(self.x)
 
 
+@dataclass(frozen=True, eq=False)
+class Paint:
+    """A bird's-eye mask and its paint pixels, found once per frame for both lines' searches."""
+
+    mask: NDArray[np.uint8]
+    ys: NDArray[np.intp]
+    xs: NDArray[np.intp]
+
+    @classmethod
+    def of(cls, mask: NDArray[np.uint8]) -> Paint:
+        """The paint pixels of `mask`."""
+        ys, xs = np.nonzero(mask)
+        return cls(mask, ys, xs)
+
+
 def fit_line(pixels: LinePixels, weight_near: bool = True) -> Fit | None:
     """Second-order fit x(y); near rows weigh more since they are sharper. None if too few."""
     if len(pixels) < 3 or np.ptp(pixels.y) < 10:
@@ -48,11 +63,11 @@ def histogram_base(mask: NDArray[np.uint8], hint: float, spread: float) -> float
 
 
 def window_search(
-    mask: NDArray[np.uint8], base_x: float, windows: int, margin: int, min_pixels: int
+    paint: Paint, base_x: float, windows: int, margin: int, min_pixels: int
 ) -> LinePixels:
     """Follow one line upwards in stacked windows, re-centring where enough pixels are found."""
-    h = mask.shape[0]
-    ys, xs = np.nonzero(mask)
+    h = paint.mask.shape[0]
+    ys, xs = paint.ys, paint.xs
     height = h // windows
     centre = base_x
     step = 0.0
@@ -74,9 +89,9 @@ def window_search(
     return LinePixels(xs[index].astype(np.float64), ys[index].astype(np.float64), tuple(boxes))
 
 
-def prior_search(mask: NDArray[np.uint8], prior: Fit, margin: int) -> LinePixels:
+def prior_search(paint: Paint, prior: Fit, margin: int) -> LinePixels:
     """Pixels within `margin` of a previous fit."""
-    ys, xs = np.nonzero(mask)
+    ys, xs = paint.ys, paint.xs
     inside = np.abs(xs - evaluate_fit(prior, ys)) < margin
     return LinePixels(xs[inside].astype(np.float64), ys[inside].astype(np.float64))
 
