@@ -87,8 +87,10 @@ class StageWorker:
         if frame.nbytes > self.frame_bytes:
             raise WorkerError(f"frame of {frame.nbytes} bytes; slots hold {self.frame_bytes}")
         slot = self._submitted % len(self._slots)
-        view = np.frombuffer(self._slots[slot], np.uint8, frame.size).reshape(frame.shape)
-        view[...] = frame
+        # Written through the mmap itself: no array view of it outlives this call (an
+        # interrupt here must not keep the slot from closing).
+        self._slots[slot].seek(0)
+        self._slots[slot].write(np.ascontiguousarray(frame).data.cast("B"))
         self._conn.send(("frame", (slot, frame.shape)))
         self._pending += 1
         self._submitted += 1
