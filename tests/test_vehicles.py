@@ -69,6 +69,26 @@ def test_pasted_vehicle_is_found(
     assert max(iou(box, truth) for box in found.boxes) >= 0.5
 
 
+@pytest.mark.parametrize(("size", "side"), [(96, "right"), (128, "right"), (128, "left")])
+def test_vehicle_cut_by_the_frame_edge_is_found(
+    model: VehicleModel, data_dir: Path, size: int, side: str
+) -> None:
+    # A car entering the frame: a bit under half of it is in the picture.
+    road = _rgb(data_dir / "test_images" / "straight_lines1.jpg").copy()
+    patch = cv2.resize(_vehicle_patch(data_dir), (size, size), interpolation=cv2.INTER_CUBIC)
+    visible, y = round(0.45 * size), 420
+    if side == "right":
+        road[y : y + size, -visible:] = patch[:, :visible]
+        truth = (1280 - visible, y, 1280, y + size)
+    else:
+        road[y : y + size, :visible] = patch[:, -visible:]
+        truth = (0, y, visible, y + size)
+    detector = VehicleDetector(model, DetectorConfig().for_still(), interleave=False)
+    found = detector.process(road).detections
+    assert len(found) >= 1
+    assert max(iou(box, truth) for box in found.boxes) >= 0.5
+
+
 def test_heatmap_suppresses_a_one_frame_false_alarm() -> None:
     heatmap = Heatmap(history=8, threshold=2.5, scale=4)
     steady = np.array([[400.0, 400, 496, 496]] * 4)  # four overlapping windows every frame
@@ -79,6 +99,19 @@ def test_heatmap_suppresses_a_one_frame_false_alarm() -> None:
         found, _ = heatmap.regions(0.35, 0.6)
         assert not any(b[2] < 300 for b in found)  # the single-frame alarm never shows
     assert len(found) == 1 and iou(found[0], steady[0]) > 0.8
+
+
+def test_heatmap_places_a_moving_vehicle_where_it_is_now() -> None:
+    heatmap = Heatmap(history=8, threshold=2.5, scale=4, recent=1, recent_threshold=1.0)
+    for frame in range(8):  # a strongly detected car crossing the image at 20 px per frame
+        x = 600 - 20 * frame
+        windows = np.array(
+            [[x - 8.0, 420, x + 56, 468], [x, 420, x + 64, 468], [x + 8, 420, x + 72, 468]]
+        )
+        heatmap.add((1280, 720), windows, np.full(3, 8.0))
+    found, _ = heatmap.regions(0.35, 0.6)
+    assert len(found) == 1
+    assert iou(found[0], [460, 420, 524, 468]) > 0.8  # its last place, not its trail
 
 
 def test_heatmap_splits_two_touching_vehicles() -> None:
@@ -109,6 +142,30 @@ def test_track_ids_stay_constant_on_a_moving_box() -> None:
     for _ in range(6):
         shown = tracker.update(Detections.from_boxes(np.zeros((0, 4)), np.zeros(0)))
     assert len(shown) == 0 and not tracker.tracks  # dropped after several frames unseen
+
+
+def test_track_follows_a_fast_car_and_drops_it_when_it_leaves() -> None:
+    tracker = Tracker(
+        match_iou=0.2,
+        smoothing=0.5,
+        confirm_frames=3,
+        max_missed=8,
+        show_missed=4,
+        velocity_gain=0.3,
+        min_inside=0.3,
+    )
+    boxes = []
+    for frame in range(40):  # oncoming: 25 px per frame to the left, 70 px wide
+        x = 900 - 25 * frame
+        truth = np.array([[x, 420, x + 70, 460]], float)
+        seen = truth if x + 70 > 0 else np.zeros((0, 4))
+        shown = tracker.update(Detections.from_boxes(seen, np.ones(len(seen))), (1280, 720))
+        if 10 <= frame <= 30:
+            assert len(shown) == 1 and shown.ids[0] == 1
+            assert iou(shown.boxes[0], truth[0]) > 0.8  # on the car, not trailing behind it
+        boxes.append(len(shown))
+    # Gone from the frame after frame 36: the track leaves with it instead of coasting on.
+    assert boxes[36] == 1 and boxes[38] == 0 and not tracker.tracks
 
 
 @pytest.mark.slow

@@ -18,9 +18,12 @@ class Band:
 
 
 def _default_bands() -> tuple[Band, ...]:
-    # At 1280x720: 48, 64, 96, 128 and 192 px windows; small ones near the horizon (y ~ 420).
+    # At 1280x720: 40, 64, 96, 128 and 192 px windows; small ones near the horizon (y ~ 420). The
+    # 40 px band covers the left three quarters: small vehicles there are far ahead or oncoming over
+    # the median, while on the right they are close and large. The larger bands reach half a window
+    # past the frame's sides (mirrored) so a vehicle entering the frame is found.
     return (
-        Band(window=48 / 720, top=396 / 720, bottom=472 / 720, left=0.1, right=0.9),
+        Band(window=40 / 720, top=400 / 720, bottom=472 / 720, left=0.0, right=0.75),
         Band(window=64 / 720, top=392 / 720, bottom=496 / 720),
         Band(window=96 / 720, top=388 / 720, bottom=548 / 720, left=-0.04, right=1.04),
         Band(window=128 / 720, top=384 / 720, bottom=592 / 720, left=-0.05, right=1.05),
@@ -41,12 +44,16 @@ class DetectorConfig:
     heat_scale: int = 4  # the heat map is kept at 1/heat_scale of the frame size
     heat_history: int = 8  # frames combined by the Heatmap
     heat_threshold: float = 2.5  # mean heat per frame over the history a pixel must exceed
+    recent_frames: int = 2  # newest frames that place each vehicle (both interleaved band sets)
+    recent_threshold: float = 1.0  # mean heat per frame over those a vehicle's pixels must exceed
     peak_fraction: float = 0.35  # a region's box keeps heat above this fraction of its peak
     split_valley: float = 0.6  # two peaks split a region when the valley is below this x peak
-    min_box: float = 0.045  # smallest box side reported / frame height
+    min_box: float = 0.03  # smallest box side reported / frame height
     # Tracking.
     match_iou: float = 0.2
-    smoothing: float = 0.5  # weight of the new box in the smoothed box
+    smoothing: float = 0.5  # weight of the measured box against the predicted one
+    velocity_gain: float = 0.3  # how much of the prediction error corrects a track's velocity
+    min_inside: float = 0.3  # a track whose box is less than this share in the frame is dropped
     confirm_frames: int = 4  # a track is shown once seen in this many frames
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames

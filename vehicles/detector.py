@@ -68,9 +68,21 @@ class VehicleDetector:
         self.keep_debug = keep_debug
         self.interleave = interleave
         cfg = self.config
-        self.heatmap = Heatmap(cfg.heat_history, cfg.heat_threshold, cfg.heat_scale)
+        self.heatmap = Heatmap(
+            cfg.heat_history,
+            cfg.heat_threshold,
+            cfg.heat_scale,
+            cfg.recent_frames,
+            cfg.recent_threshold,
+        )
         self.tracker = Tracker(
-            cfg.match_iou, cfg.smoothing, cfg.confirm_frames, cfg.max_missed, cfg.show_missed
+            cfg.match_iou,
+            cfg.smoothing,
+            cfg.confirm_frames,
+            cfg.max_missed,
+            cfg.show_missed,
+            cfg.velocity_gain,
+            cfg.min_inside,
         )
         self.frame_index = 0
 
@@ -113,7 +125,7 @@ class VehicleDetector:
         )
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat_threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
-        shown = self.tracker.update(regions)
+        shown = self.tracker.update(regions, (w, h))
         debug = (
             VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat_threshold)
             if self.keep_debug

@@ -72,12 +72,26 @@ def split_peaks(
 
 
 class Heatmap:
-    """The last `history` frames of heat; their mean is thresholded and labelled into regions."""
+    """The last `history` frames of heat.
 
-    def __init__(self, history: int, threshold: float, scale: int) -> None:
+    Their mean says where vehicles persist (a one-frame alarm never reaches the threshold); the
+    last `recent` frames say where each one is now, so a vehicle moving across the image gets a
+    box at its position, not along its trail.
+    """
+
+    def __init__(
+        self,
+        history: int,
+        threshold: float,
+        scale: int,
+        recent: int = 2,
+        recent_threshold: float = 1.0,
+    ) -> None:
         self.frames: deque[NDArray[np.float32]] = deque(maxlen=history)
         self.threshold = threshold
         self.scale = scale
+        self.recent = max(1, min(recent, history))
+        self.recent_threshold = recent_threshold
 
     def reset(self) -> None:
         """Forget all frames."""
@@ -95,32 +109,47 @@ class Heatmap:
         self.frames.append(heat)
         return heat
 
+    def _mean(self, count: int) -> NDArray[np.float32]:
+        """Mean heat per frame over the newest `count` frames (missing frames count as zero)."""
+        if not self.frames:
+            return np.zeros((1, 1), np.float32)
+        newest = list(self.frames)[-count:]
+        return np.asarray(np.sum(np.stack(newest), axis=0) / count, dtype=np.float32)
+
     @property
     def combined(self) -> NDArray[np.float32]:
         """Mean heat per frame over the history (filled up to `history` frames)."""
-        if not self.frames:
-            return np.zeros((1, 1), np.float32)
-        total = np.sum(np.stack(list(self.frames)), axis=0)
-        return np.asarray(total / (self.frames.maxlen or 1), dtype=np.float32)
+        return self._mean(self.frames.maxlen or 1)
+
+    @property
+    def current(self) -> NDArray[np.float32]:
+        """Mean heat per frame over the recent frames."""
+        return self._mean(self.recent)
 
     def regions(
         self, peak_fraction: float, valley: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Boxes (frame pixels) and peak heat of the thresholded, labelled, split regions."""
-        heat = self.combined
-        labels, _ = ndimage.label(heat > self.threshold)
+        """Boxes (frame pixels) and peak heat of the vehicles seen now where heat persists.
+
+        Recent heat is labelled, split at clear valleys between peaks, and each part is kept when it
+        touches the thresholded history; its box covers its recent heat above `peak_fraction` of
+        its peak, tighter than the union of square windows.
+        """
+        persistent = self.combined > self.threshold
+        heat = self.current
+        labels, _ = ndimage.label(heat > self.recent_threshold)
         boxes, peaks = [], []
         for index, window in enumerate(ndimage.find_objects(labels), start=1):
-            if window is None:
+            if window is None or not persistent[window][labels[window] == index].any():
                 continue
             # Work inside the region's bounding box (a few hundred pixels, not the whole map).
             local_heat = heat[window]
             region = labels[window] == index
             for part in split_peaks(local_heat, region, valley):
+                if not persistent[window][part].any():
+                    continue
                 peak = float(local_heat[part].max())
-                # The box covers the part's heat above a fraction of its peak: tighter than the
-                # union of square windows.
-                core = part & (local_heat >= max(self.threshold, peak_fraction * peak))
+                core = part & (local_heat >= max(self.recent_threshold, peak_fraction * peak))
                 ys, xs = np.nonzero(core)
                 y0, x0 = window[0].start, window[1].start
                 boxes.append([x0 + xs.min(), y0 + ys.min(), x0 + xs.max() + 1, y0 + ys.max() + 1])

@@ -109,11 +109,12 @@ def search_band(frame: NDArray[np.uint8], band: Band, weights: LinearWeights) ->
     h, w = frame.shape[:2]
     x0, y0, x1, y1, scale = band_geometry(band, (w, h), cfg.patch_size)
     # A band may reach past the side edges so cars entering the frame are covered: pad by
-    # replicating the border column.
+    # mirroring the frame there. A car cut by the edge and mirrored looks like a whole car (cars
+    # are nearly symmetric); a smeared border column looks like nothing the classifier knows.
     pad_left, pad_right = max(0, -x0), max(0, x1 - w)
     crop = frame[y0:y1, max(0, x0) : min(w, x1)]
     if pad_left or pad_right:
-        crop = cv2.copyMakeBorder(crop, 0, 0, pad_left, pad_right, cv2.BORDER_REPLICATE)
+        crop = cv2.copyMakeBorder(crop, 0, 0, pad_left, pad_right, cv2.BORDER_REFLECT)
     size = (
         max(cfg.patch_size, round((x1 - x0) / scale)),
         max(cfg.patch_size, round((y1 - y0) / scale)),

@@ -1,8 +1,13 @@
-"""A small multi-object tracker: stable integer ids, smoothed boxes, confirm and drop rules."""
+"""A small multi-object tracker: stable integer ids, smoothed boxes, confirm and drop rules.
+
+Each track follows its box with an alpha-beta filter (constant velocity per box edge): matching
+uses the box predicted for this frame, so a car crossing the image quickly keeps its id and its
+shown box does not trail behind it.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -13,17 +18,31 @@ from vehicles.detections import Detections, iou_matrix
 
 @dataclass
 class Track:
-    """One tracked vehicle."""
+    """One tracked vehicle: box and per-frame velocity of its edges (x1, y1, x2, y2)."""
 
     id: int
     box: NDArray[np.float64]
     score: float
+    velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(4))
     hits: int = 1
     missed: int = 0
 
+    def predicted(self) -> NDArray[np.float64]:
+        """The box expected in the next frame."""
+        return self.box + self.velocity
+
+
+def inside_share(boxes: NDArray[np.float64], frame_size: tuple[int, int]) -> NDArray[np.float64]:
+    """Share of each box's area that lies inside a frame of (width, height)."""
+    w, h = frame_size
+    ix = np.clip(boxes[:, 2], 0, w) - np.clip(boxes[:, 0], 0, w)
+    iy = np.clip(boxes[:, 3], 0, h) - np.clip(boxes[:, 1], 0, h)
+    area = np.maximum(boxes[:, 2] - boxes[:, 0], 1e-9) * np.maximum(boxes[:, 3] - boxes[:, 1], 1e-9)
+    return np.asarray(np.maximum(ix, 0) * np.maximum(iy, 0) / area)
+
 
 class Tracker:
-    """Associates each frame's boxes with tracks by IoU (optimal assignment)."""
+    """Associates each frame's boxes with predicted tracks by IoU (optimal assignment)."""
 
     def __init__(
         self,
@@ -32,12 +51,16 @@ class Tracker:
         confirm_frames: int,
         max_missed: int,
         show_missed: int,
+        velocity_gain: float = 0.0,
+        min_inside: float = 0.0,
     ) -> None:
         self.match_iou = match_iou
         self.smoothing = smoothing
+        self.velocity_gain = velocity_gain
         self.confirm_frames = confirm_frames
         self.max_missed = max_missed
         self.show_missed = show_missed
+        self.min_inside = min_inside
         self.tracks: list[Track] = []
         self._next_id = 1
 
@@ -46,35 +69,42 @@ class Tracker:
         self.tracks = []
         self._next_id = 1
 
-    def update(self, detections: Detections) -> Detections:
-        """Fold in one frame's detections; return the confirmed, shown tracks."""
+    def update(
+        self, detections: Detections, frame_size: tuple[int, int] | None = None
+    ) -> Detections:
+        """Fold in one frame's detections; return the confirmed, shown tracks.
+
+        With `frame_size`, a track whose predicted box has left the frame (less than `min_inside`
+        of it inside) is dropped at once instead of lingering at the edge.
+        """
         boxes = detections.boxes
-        previous = np.array([t.box for t in self.tracks]).reshape(-1, 4)
-        iou = iou_matrix(previous, boxes)
-        matched_tracks: set[int] = set()
-        matched_dets: set[int] = set()
+        predicted = np.array([t.predicted() for t in self.tracks]).reshape(-1, 4)
+        iou = iou_matrix(predicted, boxes)
+        matched: dict[int, int] = {}
         if iou.size:
             rows, cols = linear_sum_assignment(-iou)
-            for r, c in zip(rows, cols, strict=True):
-                if iou[r, c] >= self.match_iou:
-                    track = self.tracks[r]
-                    a = self.smoothing
-                    track.box = a * boxes[c] + (1 - a) * track.box
-                    track.score = a * float(detections.scores[c]) + (1 - a) * track.score
-                    track.hits += 1
-                    track.missed = 0
-                    matched_tracks.add(r)
-                    matched_dets.add(c)
+            matched = {r: c for r, c in zip(rows, cols, strict=True) if iou[r, c] >= self.match_iou}
+        a, b = self.smoothing, self.velocity_gain
         for r, track in enumerate(self.tracks):
-            if r not in matched_tracks:
+            if r in matched:
+                c = matched[r]
+                innovation = boxes[c] - predicted[r]
+                track.box = predicted[r] + a * innovation
+                track.velocity = track.velocity + b * innovation
+                track.score = a * float(detections.scores[c]) + (1 - a) * track.score
+                track.hits += 1
+                track.missed = 0
+            else:
+                track.box = predicted[r]  # coast on the last velocity
                 track.missed += 1
-        self.tracks = [t for t in self.tracks if t.missed <= self.max_missed]
-        for c in range(len(boxes)):
-            if c not in matched_dets:
-                self.tracks.append(
-                    Track(self._next_id, boxes[c].copy(), float(detections.scores[c]))
-                )
-                self._next_id += 1
+        keep = [t.missed <= self.max_missed for t in self.tracks]
+        if frame_size is not None and self.tracks:
+            share = inside_share(np.array([t.box for t in self.tracks]), frame_size)
+            keep = [k and s >= self.min_inside for k, s in zip(keep, share, strict=True)]
+        self.tracks = [t for t, k in zip(self.tracks, keep, strict=True) if k]
+        for c in sorted(set(range(len(boxes))) - set(matched.values())):
+            self.tracks.append(Track(self._next_id, boxes[c].copy(), float(detections.scores[c])))
+            self._next_id += 1
         shown = [
             t for t in self.tracks if t.hits >= self.confirm_frames and t.missed <= self.show_missed
         ]
