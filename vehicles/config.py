@@ -39,8 +39,9 @@ class DetectorConfig:
 
     bands: tuple[Band, ...] = field(default_factory=_default_bands)
     min_probability: float = 0.8  # a window adds heat when the calibrated P(vehicle) is above
-    # Each hit heats the middle of its window: this share of its width and of its height.
-    heat_footprint: tuple[float, float] = (1.0, 0.8)
+    # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
+    # training crops are wider than the car is tall, with road showing below it.
+    heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)
     heat_scale: int = 4  # the heat map is kept at 1/heat_scale of the frame size
     heat_history: int = 8  # frames combined by the Heatmap
     heat_threshold: float = 2.5  # mean heat per frame over the history a pixel must exceed

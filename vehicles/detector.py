@@ -39,11 +39,12 @@ class VehicleResult:
         return self.detections.to_record()
 
 
-def footprint(boxes: NDArray[np.float64], share: tuple[float, float]) -> NDArray[np.float64]:
-    """Boxes shrunk about their centres to `share` of their (width, height)."""
-    centre = (boxes[:, :2] + boxes[:, 2:]) / 2
-    half = (boxes[:, 2:] - boxes[:, :2]) / 2 * np.asarray(share)
-    return np.concatenate([centre - half, centre + half], axis=1)
+def footprint(
+    boxes: NDArray[np.float64], part: tuple[float, float, float, float]
+) -> NDArray[np.float64]:
+    """The `part` (x0, y0, x1, y1 as fractions of width and height) of each box."""
+    size = np.tile(boxes[:, 2:] - boxes[:, :2], 2)
+    return np.asarray(np.tile(boxes[:, :2], 2) + size * np.asarray(part))
 
 
 class VehicleDetector:
