@@ -170,13 +170,14 @@ def cell_hog(image: FloatArray, config: FeatureConfig) -> FloatArray:
     mag = np.asarray(magnitude, dtype=np.float32)
     upper_vote = mag * (position - floor)
     lower_vote = mag - upper_vote
-    lower = floor.astype(np.intp)
-    wrap = _wrap_table(bins)
-    base = _cell_base(h, w, c, cell, bins)
+    index = (_cell_base(h, w, c, cell, bins) + _wrap_table(bins)[floor.astype(np.intp)]).ravel()
     n = (h // cell) * (w // cell) * c * bins
-    hist = np.bincount((base + wrap[lower]).ravel(), lower_vote.ravel(), n)
-    hist += np.bincount((base + wrap[1:][lower]).ravel(), upper_vote.ravel(), n)
-    return hist.astype(np.float32).reshape(h // cell, w // cell, c, bins)
+    shape = (h // cell, w // cell, c, bins)
+    hist = np.bincount(index, lower_vote.ravel(), n).reshape(shape)
+    # Upper votes go to the next bin: counted at the lower bin's index, then shifted one bin on
+    # (the same additions in the same order, without a second index array).
+    hist += np.roll(np.bincount(index, upper_vote.ravel(), n).reshape(shape), 1, axis=3)
+    return hist.astype(np.float32)
 
 
 def block_normalize(cells: FloatArray, config: FeatureConfig) -> FloatArray:
