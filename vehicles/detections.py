@@ -1,4 +1,4 @@
-"""`Detections`, the value passed between the detector's stages, and the IoU of boxes."""
+"""`Detections`, the value passed between the detector's stages, and overlaps of boxes."""
 
 from __future__ import annotations
 
@@ -45,17 +45,31 @@ class Detections:
         ]
 
 
-def iou_matrix(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Pairwise IoU of two sets of [x1, y1, x2, y2] boxes."""
-    if len(a) == 0 or len(b) == 0:
-        return np.zeros((len(a), len(b)))
+def _intersection(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Pairwise intersection areas of two sets of [x1, y1, x2, y2] boxes: (len(a), len(b))."""
     ix = np.clip(
         np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None
     )
     iy = np.clip(
         np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None
     )
-    inter = ix * iy
-    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
-    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    return np.asarray(inter / np.maximum(area_a[:, None] + area_b[None, :] - inter, 1e-9))
+    return np.asarray(ix * iy)
+
+
+def _area(boxes: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.asarray((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]))
+
+
+def iou_matrix(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Pairwise IoU of two sets of [x1, y1, x2, y2] boxes."""
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros((len(a), len(b)))
+    inter = _intersection(a, b)
+    union = _area(a)[:, None] + _area(b)[None, :] - inter
+    return np.asarray(inter / np.maximum(union, 1e-9))
+
+
+def inside_share(boxes: NDArray[np.float64], frame_size: tuple[int, int]) -> NDArray[np.float64]:
+    """Share of each box's area that lies inside a frame of (width, height)."""
+    frame = np.array([[0.0, 0.0, *frame_size]])
+    return np.asarray(_intersection(boxes, frame)[:, 0] / np.maximum(_area(boxes), 1e-9))

@@ -117,8 +117,8 @@ def _cell_base(h: int, w: int, c: int, cell: int, bins: int) -> NDArray[np.intp]
 
 @lru_cache(maxsize=8)
 def _wrap_table(bins: int) -> NDArray[np.intp]:
-    """Bin number of each integer bin position in [0, 3 * bins]."""
-    return np.arange(3 * bins + 1, dtype=np.intp) % bins
+    """Bin number of each integer bin position in [0, 3 * bins)."""
+    return np.arange(3 * bins, dtype=np.intp) % bins
 
 
 def cell_gradients(image: FloatArray, cell: int) -> tuple[FloatArray, FloatArray]:

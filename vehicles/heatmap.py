@@ -140,13 +140,15 @@ class Heatmap:
         labels, _ = ndimage.label(heat > self.recent_threshold)
         boxes, peaks = [], []
         for index, window in enumerate(ndimage.find_objects(labels), start=1):
-            if window is None or not persistent[window][labels[window] == index].any():
+            if window is None:
                 continue
             # Work inside the region's bounding box (a few hundred pixels, not the whole map).
-            local_heat = heat[window]
+            local_heat, local_persistent = heat[window], persistent[window]
             region = labels[window] == index
+            if not local_persistent[region].any():
+                continue
             for part in split_peaks(local_heat, region, valley):
-                if not persistent[window][part].any():
+                if not local_persistent[part].any():
                     continue
                 peak = float(local_heat[part].max())
                 core = part & (local_heat >= max(self.recent_threshold, peak_fraction * peak))

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from vehicles.detections import Detections, iou_matrix
+from vehicles.detections import Detections, inside_share, iou_matrix
 
 
 @dataclass
@@ -30,15 +30,6 @@ class Track:
     def predicted(self) -> NDArray[np.float64]:
         """The box expected in the next frame."""
         return self.box + self.velocity
-
-
-def inside_share(boxes: NDArray[np.float64], frame_size: tuple[int, int]) -> NDArray[np.float64]:
-    """Share of each box's area that lies inside a frame of (width, height)."""
-    w, h = frame_size
-    ix = np.clip(boxes[:, 2], 0, w) - np.clip(boxes[:, 0], 0, w)
-    iy = np.clip(boxes[:, 3], 0, h) - np.clip(boxes[:, 1], 0, h)
-    area = np.maximum(boxes[:, 2] - boxes[:, 0], 1e-9) * np.maximum(boxes[:, 3] - boxes[:, 1], 1e-9)
-    return np.asarray(np.maximum(ix, 0) * np.maximum(iy, 0) / area)
 
 
 class Tracker:
