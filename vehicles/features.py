@@ -129,12 +129,15 @@ def cell_gradients(image: FloatArray, cell: int) -> tuple[FloatArray, FloatArray
     """
     h, w, c = image.shape
     flat = image.reshape(h, w * c)
-    kernel_x = np.array([[-0.5, 0.0, 0.5]], dtype=np.float32)
-    gx = np.asarray(cv2.filter2D(flat, -1, _spread(kernel_x, c), borderType=cv2.BORDER_REPLICATE))
+    gx = np.asarray(
+        cv2.filter2D(flat, -1, _difference_kernel(c), borderType=cv2.BORDER_REPLICATE)
+    )
     gx = gx.reshape(h, w, c)
     gx[:, 0::cell] = image[:, 1::cell] - image[:, 0::cell]
     gx[:, cell - 1 :: cell] = image[:, cell - 1 :: cell] - image[:, cell - 2 :: cell]
-    gy = np.asarray(cv2.filter2D(flat, -1, kernel_x.T, borderType=cv2.BORDER_REPLICATE))
+    gy = np.asarray(
+        cv2.filter2D(flat, -1, _difference_kernel(1).T, borderType=cv2.BORDER_REPLICATE)
+    )
     gy = gy.reshape(h, w, c)
     gy[0::cell] = image[1::cell] - image[0::cell]
     gy[cell - 1 :: cell] = image[cell - 1 :: cell] - image[cell - 2 :: cell]
@@ -142,15 +145,12 @@ def cell_gradients(image: FloatArray, cell: int) -> tuple[FloatArray, FloatArray
 
 
 @lru_cache(maxsize=8)
-def _spread_cached(c: int) -> NDArray[np.float32]:
+def _difference_kernel(c: int) -> NDArray[np.float32]:
+    """Central difference along a row of `c` interleaved channels: [-0.5, 0 x (2c - 1), 0.5]."""
     kernel = np.zeros((1, 2 * c + 1), dtype=np.float32)
     kernel[0, 0], kernel[0, -1] = -0.5, 0.5
+    kernel.setflags(write=False)
     return kernel
-
-
-def _spread(kernel: NDArray[np.float32], c: int) -> NDArray[np.float32]:
-    """A horizontal difference kernel that skips over interleaved channels."""
-    return _spread_cached(c) if c > 1 else kernel
 
 
 def cell_hog(image: FloatArray, config: FeatureConfig) -> FloatArray:
