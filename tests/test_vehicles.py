@@ -128,6 +128,19 @@ def test_heatmap_splits_two_touching_vehicles() -> None:
     assert max(iou(found[0], [352, 400, 448, 480]), iou(found[1], [352, 400, 448, 480])) > 0.6
 
 
+def test_heatmap_box_of_a_vehicle_at_the_frame_side_covers_its_inner_part() -> None:
+    heatmap = Heatmap(history=1, threshold=2.5, scale=4)
+    # A car at x 1168-1280: windows past the side (seeing it and its mirror image) pile heat on
+    # its outer part; one inside the frame covers all of it.
+    windows = np.array([[1216.0, 420, 1344, 540]] * 4 + [[1168.0, 420, 1296, 540]])
+    heatmap.add((1280, 720), windows, np.ones(len(windows)) * 3)
+    narrow, _ = heatmap.regions(0.35, 0.6)
+    found, _ = heatmap.regions(0.35, 0.6, edge_fraction=0.15)
+    assert len(narrow) == len(found) == 1
+    assert narrow[0][0] >= 1200  # the usual cut-off keeps only the piled-up part
+    assert iou(found[0], [1168, 420, 1280, 540]) > 0.9
+
+
 def test_track_ids_stay_constant_on_a_moving_box() -> None:
     tracker = Tracker(match_iou=0.2, smoothing=0.5, confirm_frames=3, max_missed=5, show_missed=2)
     ids = []
@@ -215,6 +228,6 @@ def test_project_cut_1_car_entering_at_the_edge(data_dir: Path, tmp_path: Path) 
     labels = load_labels(data_dir / "labels" / "project_cut_1.json")
     # The white car overtaking on the right is at most half in the frame until frame 45.
     found, required = _frames_found(records, labels, 1)
-    assert found >= 0.6 * required
+    assert found >= 0.7 * required
     v = evaluate(labels, records)["vehicles"]["iou_0.5"]
-    assert v["false_positives_per_frame"] <= 0.15
+    assert v["false_positives_per_frame"] <= 0.08

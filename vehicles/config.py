@@ -48,6 +48,9 @@ class DetectorConfig:
     recent_frames: int = 2  # newest frames that place each vehicle (both interleaved band sets)
     recent_threshold: float = 1.0  # mean heat per frame over those a vehicle's pixels must exceed
     peak_fraction: float = 0.35  # a region's box keeps heat above this fraction of its peak
+    # A region at the frame's left or right side: its width is taken at this fraction of its peak
+    # (mirrored windows past the side pile heat up there).
+    edge_peak_fraction: float = 0.2
     split_valley: float = 0.6  # two peaks split a region when the valley is below this x peak
     min_box: float = 0.03  # smallest box side reported / frame height
     # Tracking.

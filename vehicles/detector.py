@@ -117,7 +117,9 @@ class VehicleDetector:
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
         frame_heat = self.heatmap.add((w, h), footprint(boxes[strong], cfg.heat_footprint), weight)
-        region_boxes, peaks = self.heatmap.regions(cfg.peak_fraction, cfg.split_valley)
+        region_boxes, peaks = self.heatmap.regions(
+            cfg.peak_fraction, cfg.split_valley, cfg.edge_peak_fraction
+        )
         big = (
             np.minimum(
                 region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]

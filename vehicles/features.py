@@ -129,9 +129,7 @@ def cell_gradients(image: FloatArray, cell: int) -> tuple[FloatArray, FloatArray
     """
     h, w, c = image.shape
     flat = image.reshape(h, w * c)
-    gx = np.asarray(
-        cv2.filter2D(flat, -1, _difference_kernel(c), borderType=cv2.BORDER_REPLICATE)
-    )
+    gx = np.asarray(cv2.filter2D(flat, -1, _difference_kernel(c), borderType=cv2.BORDER_REPLICATE))
     gx = gx.reshape(h, w, c)
     gx[:, 0::cell] = image[:, 1::cell] - image[:, 0::cell]
     gx[:, cell - 1 :: cell] = image[:, cell - 1 :: cell] - image[:, cell - 2 :: cell]

@@ -127,13 +127,16 @@ class Heatmap:
         return self._mean(self.recent)
 
     def regions(
-        self, peak_fraction: float, valley: float
+        self, peak_fraction: float, valley: float, edge_fraction: float | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Boxes (frame pixels) and peak heat of the vehicles seen now where heat persists.
 
         Recent heat is labelled, split at clear valleys between peaks, and each part is kept when it
         touches the thresholded history; its box covers its recent heat above `peak_fraction` of
-        its peak, tighter than the union of square windows.
+        its peak, tighter than the union of square windows. A region touching the frame's left or
+        right side takes its horizontal extent at `edge_fraction` of its peak instead: windows
+        reaching past the side see the vehicle and its mirror image, so heat piles up at the side
+        and the vehicle's inner part falls below the usual fraction.
         """
         persistent = self.combined > self.threshold
         heat = self.current
@@ -153,6 +156,10 @@ class Heatmap:
                 peak = float(local_heat[part].max())
                 core = part & (local_heat >= max(self.recent_threshold, peak_fraction * peak))
                 ys, xs = np.nonzero(core)
+                at_side = window[1].start == 0 or window[1].stop == heat.shape[1]
+                if edge_fraction is not None and at_side:
+                    wide = part & (local_heat >= max(self.recent_threshold, edge_fraction * peak))
+                    xs = np.nonzero(wide)[1]
                 y0, x0 = window[0].start, window[1].start
                 boxes.append([x0 + xs.min(), y0 + ys.min(), x0 + xs.max() + 1, y0 + ys.max() + 1])
                 peaks.append(peak)
