@@ -57,7 +57,7 @@ class DetectorConfig:
     match_iou: float = 0.2
     smoothing: float = 0.5  # weight of the measured box against the predicted one
     velocity_gain: float = 0.3  # how much of the prediction error corrects a track's velocity
-    min_inside: float = 0.6  # a track whose box is less than this share in the frame is dropped
+    min_inside: float = 0.9  # a track whose box is less than this share in the frame is dropped
     confirm_frames: int = 4  # a track is shown once seen in this many frames
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames
