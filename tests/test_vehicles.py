@@ -223,11 +223,12 @@ def test_project_cut_2_vehicles(data_dir: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_project_cut_1_car_entering_at_the_edge(data_dir: Path, tmp_path: Path) -> None:
+def test_project_cut_1_vehicles(data_dir: Path, tmp_path: Path) -> None:
     records = process_clip(data_dir / "videos" / "project_cut_1.mp4", tmp_path, "--no-lanes")
     labels = load_labels(data_dir / "labels" / "project_cut_1.json")
     # The white car overtaking on the right is at most half in the frame until frame 45.
     found, required = _frames_found(records, labels, 1)
     assert found >= 0.7 * required
+    # No box trails a car leaving at the side; the small oncoming cars are mostly missed (recall).
     v = evaluate(labels, records)["vehicles"]["iou_0.5"]
-    assert v["false_positives_per_frame"] <= 0.08
+    assert v["false_positives_per_frame"] <= 0.05 and v["precision"] >= 0.93
