@@ -156,7 +156,9 @@ class Heatmap:
                 peak = float(local_heat[part].max())
                 core = part & (local_heat >= max(self.recent_threshold, peak_fraction * peak))
                 ys, xs = np.nonzero(core)
-                at_side = window[1].start == 0 or window[1].stop == heat.shape[1]
+                at_side = (window[1].start == 0 and bool(part[:, 0].any())) or (
+                    window[1].stop == heat.shape[1] and bool(part[:, -1].any())
+                )
                 if edge_fraction is not None and at_side:
                     wide = part & (local_heat >= max(self.recent_threshold, edge_fraction * peak))
                     xs = np.nonzero(wide)[1]
