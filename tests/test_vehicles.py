@@ -158,6 +158,21 @@ def test_track_ids_stay_constant_on_a_moving_box() -> None:
     assert len(shown) == 0 and not tracker.tracks  # dropped after several frames unseen
 
 
+def test_track_ids_count_shown_vehicles_only() -> None:
+    tracker = Tracker(match_iou=0.2, smoothing=0.5, confirm_frames=3, max_missed=2, show_missed=1)
+    car = np.array([[400.0, 400, 500, 470]])
+    blips = [np.array([[100.0 + 150 * k, 420, 160 + 150 * k, 460]]) for k in range(3)]
+    shown = tracker.update(Detections.from_boxes(car, np.ones(1)))
+    for blip in blips:  # three one-frame alarms in different places: none is ever shown
+        boxes = np.vstack([car, blip])
+        shown = tracker.update(Detections.from_boxes(boxes, np.ones(2)))
+        assert len(shown) <= 1
+    later = np.array([[800.0, 400, 900, 470]])
+    for _ in range(3):
+        shown = tracker.update(Detections.from_boxes(np.vstack([car, later]), np.ones(2)))
+    assert sorted(shown.ids.tolist()) == [1, 2]  # the second vehicle shown is 2, not 5
+
+
 def test_track_follows_a_fast_car_and_drops_it_when_it_leaves() -> None:
     tracker = Tracker(
         match_iou=0.2,

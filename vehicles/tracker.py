@@ -18,14 +18,15 @@ from vehicles.detections import Detections, inside_share, iou_matrix
 
 @dataclass
 class Track:
-    """One tracked vehicle: box and per-frame velocity of its edges (x1, y1, x2, y2)."""
+    """One tracked vehicle: box and per-frame velocity of its edges (x1, y1, x2, y2); `id` is 0
+    until the track is first shown."""
 
-    id: int
     box: NDArray[np.float64]
     score: float
     velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(4))
     hits: int = 1
     missed: int = 0
+    id: int = 0
 
     def predicted(self) -> NDArray[np.float64]:
         """The box expected in the next frame."""
@@ -65,8 +66,9 @@ class Tracker:
     ) -> Detections:
         """Fold in one frame's detections; return the confirmed, shown tracks.
 
-        With `frame_size`, a track whose predicted box has left the frame (less than `min_inside`
-        of it inside) is dropped at once instead of lingering at the edge.
+        Ids count shown vehicles only (1, 2, 3, ...): a candidate never confirmed uses none. With
+        `frame_size`, a track whose predicted box has left the frame (less than `min_inside` of it
+        inside) is dropped at once instead of lingering at the edge.
         """
         boxes = detections.boxes
         predicted = np.array([t.predicted() for t in self.tracks]).reshape(-1, 4)
@@ -94,11 +96,14 @@ class Tracker:
             keep = [k and s >= self.min_inside for k, s in zip(keep, share, strict=True)]
         self.tracks = [t for t, k in zip(self.tracks, keep, strict=True) if k]
         for c in sorted(set(range(len(boxes))) - set(matched.values())):
-            self.tracks.append(Track(self._next_id, boxes[c].copy(), float(detections.scores[c])))
-            self._next_id += 1
+            self.tracks.append(Track(boxes[c].copy(), float(detections.scores[c])))
         shown = [
             t for t in self.tracks if t.hits >= self.confirm_frames and t.missed <= self.show_missed
         ]
+        for track in shown:
+            if track.id == 0:
+                track.id = self._next_id
+                self._next_id += 1
         return Detections.from_boxes(
             np.array([t.box for t in shown]).reshape(-1, 4),
             np.array([t.score for t in shown]),
