@@ -173,6 +173,21 @@ def test_track_ids_count_shown_vehicles_only() -> None:
     assert sorted(shown.ids.tolist()) == [1, 2]  # the second vehicle shown is 2, not 5
 
 
+def test_track_moves_a_lagging_measurement_to_where_the_car_is_now() -> None:
+    # Heat averaged over two frames boxes a car crossing at 20 px per frame 10 px behind it.
+    def last_x1(lag: float) -> float:
+        tracker = Tracker(0.2, 0.5, 3, 8, 4, velocity_gain=0.3, lag=lag)
+        for frame in range(25):
+            x = 900.0 - 20 * frame + 10
+            box = np.array([[x, 420, x + 70, 460]])
+            shown = tracker.update(Detections.from_boxes(box, np.ones(1)))
+        return float(shown.boxes[0, 0])
+
+    truth_x1 = 900.0 - 20 * 24
+    assert abs(last_x1(0.0) - truth_x1) >= 8  # trails the car
+    assert abs(last_x1(0.5) - truth_x1) <= 2
+
+
 def test_track_follows_a_fast_car_and_drops_it_when_it_leaves() -> None:
     tracker = Tracker(
         match_iou=0.2,

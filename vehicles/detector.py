@@ -84,6 +84,8 @@ class VehicleDetector:
             cfg.show_missed,
             cfg.velocity_gain,
             cfg.min_inside,
+            # Region boxes come from heat averaged over the recent frames: centred that far back.
+            lag=(cfg.recent_frames - 1) / 2,
         )
         self.frame_index = 0
 

@@ -45,6 +45,7 @@ class Tracker:
         show_missed: int,
         velocity_gain: float = 0.0,
         min_inside: float = 0.0,
+        lag: float = 0.0,
     ) -> None:
         self.match_iou = match_iou
         self.smoothing = smoothing
@@ -53,6 +54,7 @@ class Tracker:
         self.max_missed = max_missed
         self.show_missed = show_missed
         self.min_inside = min_inside
+        self.lag = lag
         self.tracks: list[Track] = []
         self._next_id = 1
 
@@ -66,6 +68,8 @@ class Tracker:
     ) -> Detections:
         """Fold in one frame's detections; return the confirmed, shown tracks.
 
+        A measured box is taken to show the vehicle `lag` frames ago (heat averaged over recent
+        frames), so it is moved on by `lag` times the track's velocity before it corrects the track.
         Ids count shown vehicles only (1, 2, 3, ...): a candidate never confirmed uses none. With
         `frame_size`, a track whose predicted box has left the frame (less than `min_inside` of it
         inside) is dropped at once instead of lingering at the edge.
@@ -81,7 +85,7 @@ class Tracker:
         for r, track in enumerate(self.tracks):
             if r in matched:
                 c = matched[r]
-                innovation = boxes[c] - predicted[r]
+                innovation = boxes[c] + self.lag * track.velocity - predicted[r]
                 track.box = predicted[r] + a * innovation
                 track.velocity = track.velocity + b * innovation
                 track.score = a * float(detections.scores[c]) + (1 - a) * track.score
