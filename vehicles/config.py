@@ -38,7 +38,7 @@ class DetectorConfig:
     """Search bands, heat, and tracking settings (defaults for 25 fps)."""
 
     bands: tuple[Band, ...] = field(default_factory=_default_bands)
-    min_probability: float = 0.8  # a window adds heat when the calibrated P(vehicle) is above
+    min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
     # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
     # training crops are wider than the car is tall, with road showing below it.
     heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)
