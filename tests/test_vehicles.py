@@ -269,20 +269,42 @@ def test_project_cut_1_vehicles(data_dir: Path, tmp_path: Path) -> None:
     assert v["false_positives_per_frame"] <= 0.08 and v["precision"] >= 0.88
 
 
-def _shifted_records(video: Path, model: VehicleModel, dx: int, dy: int) -> list[dict[str, Any]]:
-    """Records of the vehicle stage on the clip's undistorted frames moved by (dx, dy) pixels,
-    with the boxes moved back: the same scene, seen through a different window grid."""
+def _moved_records(
+    video: Path, model: VehicleModel, scale: float = 1.0, dx: int = 0, dy: int = 0
+) -> list[dict[str, Any]]:
+    """Records of the vehicle stage on the clip's undistorted frames resized by `scale` and moved
+    by (dx, dy) pixels, with the boxes mapped back to the clip's frame."""
     info = probe_video(video)
     undistort = build_undistorter(load_calibration(default_calibration_path()), info.size)
     detector = VehicleDetector(model)
+    size = (round(info.size[0] * scale), round(info.size[1] * scale))
     shift = np.array([[1, 0, dx], [0, 1, dy]], dtype=np.float32)
     records = []
     for index, frame in enumerate(read_frames(video, info)):
-        moved = cv2.warpAffine(undistort(frame), shift, info.size, borderMode=cv2.BORDER_REPLICATE)
+        moved = undistort(frame)
+        if scale != 1.0:
+            shrink = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+            moved = np.asarray(cv2.resize(moved, size, interpolation=shrink))
+        if dx or dy:
+            moved = cv2.warpAffine(moved, shift, size, borderMode=cv2.BORDER_REPLICATE)
         found = detector.process(np.asarray(moved)).detections
-        back = Detections.from_boxes(found.boxes - [dx, dy, dx, dy], found.scores, found.ids)
+        boxes = (found.boxes - [dx, dy, dx, dy]) / scale
+        back = Detections.from_boxes(boxes, found.scores, found.ids)
         records.append({"frame": index, "vehicles": back.to_record(), "lane": None})
     return records
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scale", [0.75, 1.5])
+def test_vehicles_are_found_at_960x540_and_1920x1080(
+    model: VehicleModel, data_dir: Path, scale: float
+) -> None:
+    # Bands and windows are fractions of the frame: the same clip at another size gives the same
+    # vehicles.
+    records = _moved_records(data_dir / "videos" / "test_video.mp4", model, scale=scale)
+    labels = load_labels(data_dir / "labels" / "test_video.json")
+    v = evaluate(labels, records)["vehicles"]["iou_0.5"]
+    assert v["precision"] >= 0.95 and v["recall"] >= 0.9 and v["mean_iou"] >= 0.75
 
 
 @pytest.mark.slow
@@ -295,7 +317,8 @@ def test_precision_holds_when_the_frame_moves_by_a_few_pixels(
     labels = load_labels(data_dir / "labels" / f"{clip}.json")
     tp = fp = frames = 0
     for dx, dy in ((3, 0), (0, 3)):
-        v = evaluate(labels, _shifted_records(data_dir / "videos" / f"{clip}.mp4", model, dx, dy))
+        records = _moved_records(data_dir / "videos" / f"{clip}.mp4", model, dx=dx, dy=dy)
+        v = evaluate(labels, records)
         scores = v["vehicles"]["iou_0.5"]
         tp += scores["true_positives"]
         fp += scores["false_positives"]
