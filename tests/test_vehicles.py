@@ -247,7 +247,7 @@ def test_project_cut_2_vehicles(data_dir: Path, tmp_path: Path) -> None:
     labels = load_labels(data_dir / "labels" / "project_cut_2.json")
     v = evaluate(labels, records)["vehicles"]["iou_0.5"]
     assert v["precision"] >= 0.95 and v["false_positives_per_frame"] <= 0.05
-    assert v["mean_iou"] >= 0.75
+    assert v["mean_iou"] >= 0.75  # the target; 0.75 pooled over moved copies too
     # The car ahead is held in every frame; the recall target is not met here because the small
     # oncoming cars behind the railing (ids 3, 4, 6) are not recognised by the classifier.
     found, required = _frames_found(records, labels, 1)
@@ -259,14 +259,14 @@ def test_project_cut_1_vehicles(data_dir: Path, tmp_path: Path) -> None:
     records = process_clip(data_dir / "videos" / "project_cut_1.mp4", tmp_path, "--no-lanes")
     labels = load_labels(data_dir / "labels" / "project_cut_1.json")
     # The white car overtaking on the right is at most half in the frame until frame 45.
-    # Over copies moved by a few pixels it is matched in 24-29 of its 41 required frames.
+    # Over copies moved by a few pixels it is matched in 27-30 of its 41 required frames.
     found, required = _frames_found(records, labels, 1)
-    assert found >= 0.55 * required
+    assert found >= 0.62 * required
     # No box trails a car leaving at the side; the small oncoming cars are mostly missed (recall).
-    # Precision here varies from 0.90 to 0.98 with where the window grid falls (see the test on
-    # moved copies, which pools two of them).
+    # Over moved copies precision is 0.95-1.00 (see the test on moved copies).
     v = evaluate(labels, records)["vehicles"]["iou_0.5"]
-    assert v["false_positives_per_frame"] <= 0.08 and v["precision"] >= 0.88
+    assert v["false_positives_per_frame"] <= 0.05 and v["precision"] >= 0.93
+    assert v["mean_iou"] >= 0.75  # the target (0.76); 0.75 pooled over moved copies
 
 
 def _moved_records(
@@ -323,4 +323,4 @@ def test_precision_holds_when_the_frame_moves_by_a_few_pixels(
         tp += scores["true_positives"]
         fp += scores["false_positives"]
         frames += v["frames_scored"]
-    assert tp / (tp + fp) >= 0.93 and fp / frames <= 0.05
+    assert tp / (tp + fp) >= 0.95 and fp / frames <= 0.05

@@ -27,9 +27,7 @@ def _default_bands() -> tuple[Band, ...]:
         Band(window=64 / 720, top=392 / 720, bottom=496 / 720),
         Band(window=96 / 720, top=388 / 720, bottom=548 / 720, left=-0.04, right=1.04),
         Band(window=128 / 720, top=384 / 720, bottom=592 / 720, left=-0.05, right=1.05),
-        Band(
-            window=192 / 720, top=380 / 720, bottom=668 / 720, left=-0.08, right=1.08, step_cells=2
-        ),
+        Band(window=192 / 720, top=380 / 720, bottom=668 / 720, left=-0.08, right=1.08),
     )
 
 
