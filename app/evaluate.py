@@ -122,7 +122,6 @@ def match_frame(
     used_d: set[int] = set()
     used_t: set[int] = set()
     tp_ious: list[float] = []
-    neutral = 0
     for value, i, j in pairs:
         if value < threshold:
             break
@@ -130,9 +129,7 @@ def match_frame(
             continue
         used_d.add(i)
         used_t.add(j)
-        if truth[j].ignore:
-            neutral += 1
-        else:
+        if not truth[j].ignore:
             tp_ious.append(value)
     fp = len(detections) - len(used_d)
     fn = sum(1 for j, t in enumerate(truth) if not t.ignore and j not in used_t)

@@ -56,7 +56,6 @@ class LaneDebug:
     mask: NDArray[np.uint8]
     left_pixels: LinePixels
     right_pixels: LinePixels
-    status: tuple[str, ...]
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,7 +117,7 @@ class LaneFinder:
             fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
         status = self._check_and_update(fits, pixels, view)
         lane = self._estimate(view)
-        debug = LaneDebug(birdseye, mask, pixels[0], pixels[1], status) if self.keep_debug else None
+        debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
         return LaneResult(lane, debug, status)
 
     def _prior(self, rows: int) -> LanePrior | None:

@@ -18,13 +18,6 @@ def radius_of_curvature(
     return float(min(cap_m, 1.0 / curvature)) if curvature > 0 else cap_m
 
 
-def signed_radius(fit: Fit, y_px: float, xm_per_px: float, ym_per_px: float, cap_m: float) -> float:
-    """Radius with a sign: negative when the road bends left, positive when it bends right."""
-    r = radius_of_curvature(fit, y_px, xm_per_px, ym_per_px, cap_m)
-    # In the bird's-eye view y grows towards the camera: a > 0 means x shrinks ahead (bends left).
-    return -r if fit[0] > 0 else r
-
-
 def lane_offset(left: Fit, right: Fit, y_px: float, centre_px: float, xm_per_px: float) -> float:
     """Camera position minus lane centre in metres: positive when the car is right of centre."""
     middle = (evaluate_fit(left, y_px) + evaluate_fit(right, y_px)) / 2

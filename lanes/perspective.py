@@ -19,7 +19,6 @@ class BirdsEye:
     size: tuple[int, int]  # bird's-eye (width, height)
     matrix: NDArray[np.float64]
     inverse: NDArray[np.float64]
-    src: NDArray[np.float32]
     xm_per_px: float
     ym_per_px: float
 
@@ -74,7 +73,6 @@ def birdseye_for(frame_size: tuple[int, int], config: LaneConfig) -> BirdsEye:
         size=(bw, bh),
         matrix=matrix,
         inverse=inverse,
-        src=src,
         xm_per_px=config.lane_width_m / lane_px,
         ym_per_px=config.warp_length_m / bh,
     )

@@ -38,13 +38,11 @@ class Paint:
         return cls(mask, ys, xs)
 
 
-def fit_line(pixels: LinePixels, weight_near: bool = True) -> Fit | None:
+def fit_line(pixels: LinePixels) -> Fit | None:
     """Second-order fit x(y); near rows weigh more since they are sharper. None if too few."""
     if len(pixels) < 3 or np.ptp(pixels.y) < 10:
         return None
-    weights = None
-    if weight_near:
-        weights = 0.5 + pixels.y / max(float(pixels.y.max()), 1.0)
+    weights = 0.5 + pixels.y / max(float(pixels.y.max()), 1.0)
     return np.polyfit(pixels.y, pixels.x, 2, w=weights)
 
 
