@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from app.stages import StageResult
 from lanes.finder import LaneEstimate, LaneResult
+from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
 
 Frame = NDArray[np.uint8]
@@ -67,15 +68,16 @@ def _label(frame: Frame, text: str, x: int, y: int, color: tuple[int, int, int])
     cv2.putText(frame, text, (x + 3, y - base - 1), font, size, TEXT, thick, cv2.LINE_AA)
 
 
-def draw_vehicles(frame: Frame, result: VehicleResult) -> None:
-    """Each shown vehicle's box with its id and score."""
+def draw_boxes(frame: Frame, detections: Detections, color: tuple[int, int, int] = BOX) -> None:
+    """Each box with its id (when it has one) and score."""
     s = _scale(frame)
     for box, score, track_id in zip(
-        result.detections.boxes, result.detections.scores, result.detections.ids, strict=True
+        detections.boxes, detections.scores, detections.ids, strict=True
     ):
         x1, y1, x2, y2 = (round(float(v)) for v in box)
-        cv2.rectangle(frame, (x1, y1), (x2, y2), BOX, max(2, round(3 * s)), cv2.LINE_AA)
-        _label(frame, f"#{track_id} {score:.2f}", x1, y1, BOX)
+        cv2.rectangle(frame, (x1, y1), (x2, y2), color, max(2, round(3 * s)), cv2.LINE_AA)
+        text = f"#{track_id} {score:.2f}" if track_id >= 0 else f"{score:.2f}"
+        _label(frame, text, x1, y1, color)
 
 
 def hud_lines(lane: LaneEstimate | None, vehicles: int | None, fps: float) -> list[str]:
@@ -175,7 +177,7 @@ def compose(
         draw_lane(out, lane, options.lane_alpha)
     count = None
     if isinstance(vehicle_result, VehicleResult):
-        draw_vehicles(out, vehicle_result)
+        draw_boxes(out, vehicle_result.detections)
         count = len(vehicle_result.detections)
     draw_panel(
         out,

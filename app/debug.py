@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.atomic import ensure_writable_dir
-from app.compose import compose, heat_picture, lane_inset
+from app.compose import compose, draw_boxes, heat_picture, lane_inset
 from app.errors import InputError
 from app.pipeline import FrameOutput, Pipeline
 from app.video import Frame, probe_video, read_frames, write_image
@@ -40,24 +40,14 @@ def parse_frames(spec: str) -> tuple[int, int]:
     return first, last
 
 
-def _boxes(
-    frame: Frame, detections: Detections, color: tuple[int, int, int], labels: bool = True
-) -> Frame:
+def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) -> Frame:
+    """A copy of the frame with the boxes drawn."""
     out = frame.copy()
-    for box, score, track_id in zip(
-        detections.boxes, detections.scores, detections.ids, strict=True
-    ):
-        x1, y1, x2, y2 = (round(float(v)) for v in box)
-        cv2.rectangle(out, (x1, y1), (x2, y2), color, 3)
-        if labels:
-            text = f"#{track_id} {score:.2f}" if track_id >= 0 else f"{score:.2f}"
-            cv2.putText(out, text, (x1, max(y1 - 6, 14)), cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2)
+    draw_boxes(out, detections, color)
     return out
 
 
-def intermediates(
-    out: FrameOutput, composite: Frame, min_probability: float = 0.8
-) -> dict[str, NDArray[np.uint8]]:
+def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.uint8]]:
     """Named pictures of every intermediate of one processed frame, in pipeline order."""
     pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
     lane = out.results.get("lane")
