@@ -26,9 +26,9 @@ def build_stages(
     if vehicles:
         from vehicles.config import DetectorConfig
         from vehicles.detector import VehicleDetector
-        from vehicles.model import default_model_path, load_model
+        from vehicles.model import load_model
 
-        classifier = load_model(model if model is not None else default_model_path())
+        classifier = load_model(model)
         config = DetectorConfig().for_still() if still else DetectorConfig()
         stages.append(
             VehicleDetector(classifier, config, keep_debug=keep_debug, interleave=not still)

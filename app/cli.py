@@ -16,6 +16,7 @@ from app.runtime import tune_process
 from app.stages import StageResult
 from app.video import Frame
 from camera_cal import (
+    Calibration,
     CalibrationError,
     calibrate,
     default_calibration_path,
@@ -97,6 +98,11 @@ def calibrate_command(
     )
 
 
+def _calibration(value: str) -> Calibration | None:
+    """The --calibration option: a calibration file, or None for 'none' (no undistortion)."""
+    return None if value.lower() == "none" else load_calibration(Path(value))
+
+
 def default_output(source: Path) -> Path:
     """NAME_roadview.EXT next to the input."""
     return source.with_name(f"{source.stem}_roadview{source.suffix}")
@@ -134,7 +140,7 @@ def process_command(
     from app.pipeline import Pipeline, process_still, process_video
     from app.video import is_image
 
-    cal = None if calibration.lower() == "none" else load_calibration(Path(calibration))
+    cal = _calibration(calibration)
     output = output if output is not None else default_output(source)
     if output.resolve() == source.resolve():
         raise InputError("output would overwrite the input; choose another -o")
@@ -186,7 +192,7 @@ def debug_command(
 
     span = parse_frames(frames)
     check_input(source)
-    cal = None if calibration.lower() == "none" else load_calibration(Path(calibration))
+    cal = _calibration(calibration)
     folder = out if out is not None else source.with_name(f"{source.stem}_debug")
     pipeline = Pipeline(cal, build_stages(model=model, keep_debug=True))
     written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
@@ -260,10 +266,10 @@ def evaluate_classifier_command(
 ) -> None:
     """Accuracy, precision and recall of the classifier on folders of patches of any size."""
     from vehicles.dataset import load_patches
-    from vehicles.model import default_model_path, load_model
+    from vehicles.model import load_model
     from vehicles.train import extract_features, scores
 
-    classifier = load_model(model if model is not None else default_model_path())
+    classifier = load_model(model)
     patches = load_patches(data, classifier.config.patch_size)
     x = extract_features(patches.images, classifier.config)
     result = scores(patches.labels, classifier.predict(x))

@@ -24,7 +24,7 @@ from app.video import VideoWriter, probe_video, read_frames
 from camera_cal import default_calibration_path, load_calibration
 from vehicles.detector import VehicleDetector
 from vehicles.features import patch_features
-from vehicles.model import default_model_path, load_model
+from vehicles.model import load_model
 from vehicles.search import band_geometry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -136,7 +136,7 @@ def long_clip(data: Path, folder: Path, seconds: float = 50.0) -> Path:
 
 def naive_detector_ms(clip: Path, frames: int = 2) -> dict[str, float]:
     """Per-window reference: every window cut, resized, featurised and classified one by one."""
-    model = load_model(default_model_path())
+    model = load_model()
     detector = VehicleDetector(model, interleave=False)
     info = probe_video(clip)
     cfg = model.config
@@ -170,7 +170,7 @@ def patch_feature_ms(data: Path, repeats: int = 2000) -> float:
     """Features of one 64x64 patch, in ms."""
     image = np.asarray(cv2.imread(str(data / "test_images" / "test1.jpg")), np.uint8)
     rgb = np.ascontiguousarray(image[400:464, 800:864, ::-1])
-    config = load_model(default_model_path()).config
+    config = load_model().config
     t0 = time.perf_counter()
     for _ in range(repeats):
         patch_features(rgb, config)

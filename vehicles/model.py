@@ -115,9 +115,10 @@ def save_model(model: VehicleModel, path: Path) -> None:
         Path(tmp).unlink(missing_ok=True)
 
 
-def load_model(path: Path) -> VehicleModel:
-    """Read a model file, checking format, version and shapes; never unpickles."""
-    path = Path(path)
+def load_model(path: Path | None = None) -> VehicleModel:
+    """Read a model file (the shipped one by default), checking format, version and shapes;
+    never unpickles."""
+    path = Path(path) if path is not None else default_model_path()
     if not path.is_file():
         raise ModelError(f"model file {path} does not exist; run 'make train' or pass --model")
     fix = "retrain with 'make train' or pass another --model"
