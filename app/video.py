@@ -1,12 +1,15 @@
-"""Video and still-image input/output through ffmpeg pipes (the binary moviepy uses)."""
+"""Video and still-image input/output through ffmpeg pipes (the binary imageio-ffmpeg ships)."""
 
 from __future__ import annotations
 
 import contextlib
+import functools
+import re
 import subprocess
+import tempfile
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from queue import Full, Queue
 from typing import IO
@@ -21,22 +24,60 @@ IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".
 Frame = NDArray[np.uint8]  # H x W x 3, RGB
 
 
-def ffmpeg_binary() -> str:
-    """Path of the ffmpeg executable that moviepy is configured with."""
-    from moviepy.config import FFMPEG_BINARY
+@dataclass(frozen=True)
+class Container:
+    """How roadview encodes into one output container: video codec options and audio codec."""
 
-    return str(FFMPEG_BINARY)
+    video: tuple[str, ...]
+    audio: str
+
+
+_X264 = ("-c:v", "libx264", "-preset", "ultrafast", "-crf", "20", "-pix_fmt", "yuv420p")
+# VP9 in real-time mode: about as fast as the processing; quality set by CRF alone.
+_VP9 = (
+    "-c:v",
+    "libvpx-vp9",
+    "-deadline",
+    "realtime",
+    "-cpu-used",
+    "8",
+    "-row-mt",
+    "1",
+    "-crf",
+    "32",
+    "-b:v",
+    "0",
+    "-pix_fmt",
+    "yuv420p",
+)
+CONTAINERS: dict[str, Container] = {
+    ".mp4": Container((*_X264, "-movflags", "+faststart"), "aac"),
+    ".m4v": Container((*_X264, "-movflags", "+faststart"), "aac"),
+    ".mov": Container((*_X264, "-movflags", "+faststart"), "aac"),
+    ".mkv": Container(_X264, "aac"),
+    ".avi": Container(_X264, "libmp3lame"),
+    ".webm": Container(_VP9, "libopus"),
+}
+
+
+@functools.cache
+def ffmpeg_binary() -> str:
+    """Path of the ffmpeg executable shipped by imageio-ffmpeg (a dependency of moviepy)."""
+    from imageio_ffmpeg import get_ffmpeg_exe
+
+    return str(get_ffmpeg_exe())
 
 
 @dataclass(frozen=True)
 class VideoInfo:
-    """What a video file holds, read from its container."""
+    """What a video file holds, as ffmpeg decodes it (rotation applied)."""
 
-    size: tuple[int, int]  # (width, height)
+    size: tuple[int, int]  # (width, height) of the decoded, upright frames
     fps: float
     n_frames: int
     duration: float
     has_audio: bool
+    rotation: int = 0  # degrees of the display-matrix tag that decoding applies
 
 
 def is_image(path: Path) -> bool:
@@ -58,35 +99,135 @@ def check_input(path: Path) -> None:
         raise InputError(f"input {path} cannot be read (permission denied)") from None
 
 
-def probe_video(path: Path) -> VideoInfo:
-    """Size, frame rate, frame count and audio presence of a video, or a clear InputError."""
-    check_input(path)
-    from moviepy.video.io.ffmpeg_reader import ffmpeg_parse_infos
+_STREAM = re.compile(r"^\s*Stream #0:\d+.*?: (Video|Audio): (.*)$")
+_SIZE = re.compile(r"(?:^|[ ,])(\d{1,5})x(\d{1,5})(?:[ ,]|$)")
+_RATE = re.compile(r"([\d.]+)(k?) (fps|tbr)")
+_ROTATION = re.compile(r"(?:rotation of|rotate\s*:)\s*(-?[\d.]+)")
+_DURATION = re.compile(r"Duration: (\d+):(\d+):([\d.]+)")
+_PACKETS = re.compile(r"frame=\s*(\d+)")
+_LEVEL = re.compile(r"\[(error|fatal)\] (.*)$")
 
+
+def _seconds(h: str, m: str, s: str) -> float:
+    return int(h) * 3600 + int(m) * 60 + float(s)
+
+
+@dataclass
+class ProbeFacts:
+    """What one probing pass of ffmpeg said about a file (filled while parsing its log)."""
+
+    size: tuple[int, int] | None = None
+    fps: float = 0.0
+    duration: float = 0.0
+    packets: int | None = None
+    audio: bool = False
+    rotation: int = 0
+    errors: list[str] = field(default_factory=list)
+
+
+def parse_probe(text: str) -> ProbeFacts:
+    """Facts from `ffmpeg -loglevel level+info -i FILE -map 0:v:0 -c copy -f null -` output.
+
+    Only the input section describes the file; the stream copy's closing `frame=` counts the
+    video packets (the container's duration also counts a longer audio track), and errors while
+    reading every packet mean the file is damaged.
+    """
+    facts = ProbeFacts()
+    in_input, in_video = True, False
+    for raw in text.replace("\r", "\n").splitlines():
+        line = raw[len("[info] ") :] if raw.startswith("[info] ") else raw
+        if line.startswith(("Output #", "Stream mapping")):
+            in_input = False
+        if in_input:
+            if (match := _DURATION.search(line)) is not None:
+                facts.duration = _seconds(*match.groups())
+            if (match := _STREAM.match(line)) is not None:
+                kind, details = match.groups()
+                in_video = False
+                if kind == "Audio":
+                    facts.audio = True
+                elif facts.size is None and (size := _SIZE.search(details)) is not None:
+                    facts.size = (int(size.group(1)), int(size.group(2)))
+                    found = _RATE.findall(details)
+                    rates = {unit: float(v) * (1000 if k else 1) for v, k, unit in found}
+                    facts.fps = rates.get("fps") or rates.get("tbr") or 0.0
+                    in_video = True
+            elif in_video and (rotation := _ROTATION.search(line)) is not None:
+                facts.rotation = round(float(rotation.group(1))) % 360
+        if (match := _PACKETS.search(line)) is not None:
+            facts.packets = int(match.group(1))
+        if (match := _LEVEL.search(raw)) is not None:
+            facts.errors.append(match.group(2).strip())
+    return facts
+
+
+def probe_video(path: Path) -> VideoInfo:
+    """Size (as decoded, rotation applied), rate, frame count and audio of a video.
+
+    One ffmpeg pass copies every video packet to nowhere: cheap (no decoding), and it reads the
+    whole file, so truncation shows here, before any output is started.
+    """
+    check_input(path)
+    command = [
+        ffmpeg_binary(),
+        "-hide_banner",
+        "-nostdin",
+        "-loglevel",
+        "level+info",
+        "-i",
+        str(path),
+        "-map",
+        "0:v:0?",
+        "-c",
+        "copy",
+        "-f",
+        "null",
+        "-",
+    ]
     try:
-        infos = ffmpeg_parse_infos(str(path))
-    except (OSError, IndexError, KeyError, ValueError):
-        infos = {}
-    if not infos.get("video_found"):
-        raise InputError(f"{path} is not a video ffmpeg can read; pass an .mp4/.avi/.mov file")
-    fps = float(infos.get("video_fps") or 0.0)
-    size = infos.get("video_size") or [0, 0]
-    n_frames = int(infos.get("video_n_frames") or 0)
-    if fps <= 0 or size[0] <= 0 or n_frames <= 0:
+        done = subprocess.run(command, capture_output=True, timeout=600, check=False)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        raise InputError(f"ffmpeg could not read {path} ({error})") from None
+    facts = parse_probe(done.stderr.decode(errors="replace"))
+    if facts.size is None:
+        raise InputError(
+            f"{path} is not a video ffmpeg can read; pass an .mp4/.mov/.mkv/.webm file"
+        )
+    if facts.errors:
+        raise InputError(
+            f"{path} is truncated or damaged (ffmpeg: {facts.errors[-1]}); "
+            "re-export or re-download the video"
+        )
+    # Packets can exceed frames (an edit list may drop a few at the start) and the duration
+    # can exceed the video (a longer audio track): the smaller is the estimate. The decoded
+    # count is what the drivers go by.
+    n_frames = round(facts.duration * facts.fps)
+    if facts.packets is not None:
+        n_frames = min(n_frames, facts.packets) if n_frames > 0 else facts.packets
+    duration = n_frames / facts.fps if facts.fps > 0 else 0.0
+    if facts.fps <= 0 or min(facts.size) <= 0 or n_frames <= 0:
         raise InputError(f"{path} has no video frames; the file may be truncated or empty")
+    width, height = facts.size
+    if facts.rotation in (90, 270):
+        width, height = height, width
     return VideoInfo(
-        size=(int(size[0]), int(size[1])),
-        fps=fps,
+        size=(width, height),
+        fps=facts.fps,
         n_frames=n_frames,
-        duration=float(infos.get("video_duration") or infos.get("duration") or 0.0),
-        has_audio=bool(infos.get("audio_found")),
+        duration=duration,
+        has_audio=facts.audio,
+        rotation=facts.rotation,
     )
 
 
 def read_frames(
     path: Path, info: VideoInfo, start_frame: int = 0, end_frame: int | None = None
 ) -> Iterator[Frame]:
-    """Decoded RGB frames in order, from `start_frame` up to (not including) `end_frame`."""
+    """Decoded upright RGB frames in order, from `start_frame` up to (not including) `end_frame`.
+
+    ffmpeg's messages go to a temporary file, not a pipe: a pipe nobody reads fills up and stalls
+    the decoder on a file with many warnings.
+    """
     width, height = info.size
     command = [ffmpeg_binary(), "-nostdin", "-loglevel", "error"]
     if start_frame > 0:
@@ -105,24 +246,23 @@ def read_frames(
         "-",
     ]
     frame_bytes = width * height * 3
-    process = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=frame_bytes * 2
-    )
-    assert process.stdout is not None
-    index = start_frame
-    try:
-        while end_frame is None or index < end_frame:
-            data = _read_exactly(process.stdout, frame_bytes)
-            if data is None:
-                break
-            yield np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
-            index += 1
-    finally:
-        process.kill()
-        process.wait()
-        if process.stderr is not None:
-            process.stderr.close()
-        process.stdout.close()
+    with tempfile.TemporaryFile() as log:
+        process = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=log, bufsize=frame_bytes * 2
+        )
+        assert process.stdout is not None
+        index = start_frame
+        try:
+            while end_frame is None or index < end_frame:
+                data = _read_exactly(process.stdout, frame_bytes)
+                if data is None:
+                    break
+                yield np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
+                index += 1
+        finally:
+            process.kill()
+            process.wait()
+            process.stdout.close()
 
 
 def _read_exactly(stream: IO[bytes], n: int) -> bytes | None:
@@ -138,8 +278,25 @@ def _read_exactly(stream: IO[bytes], n: int) -> bytes | None:
     return b"".join(chunks) if len(chunks) > 1 else chunks[0]
 
 
+def container_for(path: Path) -> Container:
+    """The encoding for an output name, or an InputError naming the containers roadview writes."""
+    container = CONTAINERS.get(path.suffix.lower())
+    if container is None:
+        names = ", ".join(sorted(CONTAINERS))
+        raise InputError(
+            f"roadview cannot write a {path.suffix or 'suffix-less'} video ({path}); "
+            f"name the output with one of {names}"
+        )
+    return container
+
+
 class VideoWriter:
-    """Encode RGB frames to H.264 through an ffmpeg pipe, copying audio from a source if asked."""
+    """Encode RGB frames through an ffmpeg pipe, in the codec the output's suffix calls for.
+
+    Odd frame sizes are padded by one pixel at the right or bottom (the codecs need even sizes),
+    so coordinates stay those of the input. Audio is copied from `audio_from`, cut to the frames'
+    span and never used to end the video: every frame written is in the file.
+    """
 
     def __init__(
         self,
@@ -148,11 +305,11 @@ class VideoWriter:
         fps: float,
         audio_from: Path | None = None,
         audio_start_s: float = 0.0,
-        audio_end_s: float | None = None,
+        audio_seconds: float | None = None,
         preset: str = "ultrafast",
-        crf: int = 20,
     ) -> None:
         self.size = size
+        container = container_for(path)
         width, height = size
         command = [
             ffmpeg_binary(),
@@ -174,33 +331,19 @@ class VideoWriter:
         if audio_from is not None:
             if audio_start_s > 0:
                 command += ["-ss", f"{audio_start_s:.6f}"]
-            if audio_end_s is not None:
-                command += ["-to", f"{audio_end_s:.6f}"]
-            command += [
-                "-i",
-                str(audio_from),
-                "-map",
-                "0:v:0",
-                "-map",
-                "1:a:0?",
-                "-c:a",
-                "aac",
-                "-shortest",
-            ]
-        command += [
-            "-c:v",
-            "libx264",
-            "-preset",
-            preset,
-            "-crf",
-            str(crf),
-            "-pix_fmt",
-            "yuv420p",
-            "-movflags",
-            "+faststart",
-            str(path),
-        ]
-        self._process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+            if audio_seconds is not None:
+                command += ["-t", f"{audio_seconds:.6f}"]
+            command += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0?"]
+            command += ["-c:a", container.audio]
+        if width % 2 or height % 2:
+            command += ["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"]
+        video = list(container.video)
+        if "-preset" in video:
+            video[video.index("-preset") + 1] = preset
+        command += [*video, str(path)]
+        # Messages go to a file: a full stderr pipe would stall ffmpeg and then this writer.
+        self._log = tempfile.TemporaryFile()  # noqa: SIM115 (lives as long as the writer)
+        self._process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=self._log)
         # Frames go to ffmpeg from a thread so a full pipe never stalls the processing.
         self._queue: Queue[Frame | None] = Queue(maxsize=4)
         self._broken = False
@@ -214,7 +357,7 @@ class VideoWriter:
                 continue
             try:
                 self._process.stdin.write(frame.tobytes())
-            except (BrokenPipeError, ValueError):
+            except (BrokenPipeError, ValueError, OSError):
                 self._broken = True
 
     def write(self, frame: Frame) -> None:
@@ -233,11 +376,12 @@ class VideoWriter:
         if self._process.stdin is not None and not self._process.stdin.closed:
             with contextlib.suppress(BrokenPipeError):
                 self._process.stdin.close()
-        stderr = (
-            self._process.stderr.read().decode(errors="replace") if self._process.stderr else ""
-        )
-        if self._process.wait() != 0:
-            last = stderr.strip().splitlines()[-1] if stderr.strip() else "unknown error"
+        code = self._process.wait()
+        self._log.seek(0)
+        messages = self._log.read().decode(errors="replace").strip()
+        self._log.close()
+        if code != 0:
+            last = messages.splitlines()[-1] if messages else f"exit code {code}"
             raise InputError(f"ffmpeg could not write the video: {last}")
 
     def abort(self) -> None:
@@ -248,6 +392,7 @@ class VideoWriter:
         if self._thread.is_alive():
             with contextlib.suppress(Full):
                 self._queue.put_nowait(None)
+        self._log.close()
 
 
 def read_image(path: Path) -> Frame:
