@@ -18,6 +18,7 @@ from app.atomic import atomic_output
 from app.errors import InputError
 from app.progress import Progress
 from app.record import frame_record, write_record_line
+from app.runtime import warm_up_opencv
 from app.stages import FrameStage, StageResult
 from app.video import Frame, VideoWriter, probe_video, read_frames, read_image, write_image
 from app.workers import StageWorker
@@ -205,8 +206,13 @@ def process_video(
     end_s: float | None = None,
 ) -> RunSummary:
     """Process a video into an annotated video (and record); outputs appear only on success."""
-    info = probe_video(source)
-    first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
+    warm_up = warm_up_opencv()
+    try:
+        info = probe_video(source)
+        first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
+    finally:
+        # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
+        warm_up.join()
     pipeline.prepare(info.size)
     started = time.perf_counter()
     count = 0
@@ -223,15 +229,20 @@ def process_video(
             info.fps,
             audio_from=source if info.has_audio else None,
             audio_start_s=first / info.fps,
-            audio_end_s=last / info.fps if end_s is not None else None,
+            audio_seconds=(last - first) / info.fps,
         )
         try:
-            decoded = prefetch(read_frames(source, info, first, last))
+            # Without --end every decoded frame is read (the probed count is an estimate).
+            decoded = prefetch(
+                read_frames(source, info, first, last if end_s is not None else None)
+            )
             for offset, out in enumerate(pipeline.stream(decoded)):
                 index = first + offset
                 writer.write(compositor(out.undistorted, out.results, progress.fps))
                 if handle is not None:
-                    write_record_line(handle, frame_record(index, index / info.fps, out.results))
+                    write_record_line(
+                        handle, frame_record(index, index / info.fps, info.size, out.results)
+                    )
                 count += 1
                 progress.update()
             progress.close()
@@ -272,5 +283,7 @@ def process_still(
         write_image(outputs.enter_context(atomic_output(output)), composed)
         if record is not None:
             with outputs.enter_context(atomic_output(record)).open("w") as handle:
-                write_record_line(handle, frame_record(0, 0.0, out.results))
+                write_record_line(
+                    handle, frame_record(0, 0.0, (image.shape[1], image.shape[0]), out.results)
+                )
     return RunSummary(1, time.perf_counter() - started, output, record)

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import threading
 
 import cv2
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 # glibc mallopt parameters (malloc.h).
@@ -48,3 +50,21 @@ def tune_process() -> None:
     """Everything above, for a process that is about to process video."""
     keep_freed_memory()
     single_threaded_natives()
+
+
+def _build_opencv_tables() -> None:
+    # The first RGB->LAB conversion builds OpenCV's gamma and LAB tables (~80 ms) and the first
+    # text measurement loads the Hershey fonts (~25 ms); both release the GIL meanwhile.
+    cv2.cvtColor(np.zeros((1, 1, 3), np.uint8), cv2.COLOR_RGB2LAB)
+    cv2.getTextSize("0", cv2.FONT_HERSHEY_SIMPLEX, 1.0, 1)
+
+
+def warm_up_opencv() -> threading.Thread:
+    """Start building OpenCV's one-time tables in a thread; join it before the first frame.
+
+    Started before probing the input, the ~0.1 s of table building overlaps with ffmpeg's probe
+    instead of delaying the first frame.
+    """
+    thread = threading.Thread(target=_build_opencv_tables, name="opencv-warm-up", daemon=True)
+    thread.start()
+    return thread
