@@ -28,9 +28,14 @@ def atomic_output(path: Path) -> Iterator[Path]:
     """Yield a temporary path beside `path` with the same suffix; rename it to `path` on success."""
     path = Path(path)
     ensure_writable_dir(path.parent)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent
-    )
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent
+        )
+    except OSError as error:
+        raise InputError(
+            f"cannot write {path} ({error.strerror or error}); choose another place for it"
+        ) from None
     os.close(fd)
     tmp = Path(tmp_name)
     umask = os.umask(0)

@@ -33,6 +33,7 @@ cli = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: no <bool>/<path> type tags, no box drawing
 )
 USER_ERRORS: tuple[type[Exception], ...] = (InputError, CalibrationError, DatasetError, ModelError)
 _verbose = False
@@ -103,11 +104,6 @@ def _calibration(value: str) -> Calibration | None:
     return None if value.lower() == "none" else load_calibration(Path(value))
 
 
-def default_output(source: Path) -> Path:
-    """NAME_roadview.EXT next to the input."""
-    return source.with_name(f"{source.stem}_roadview{source.suffix}")
-
-
 @cli.command("process")
 def process_command(
     source: Annotated[Path, typer.Argument(metavar="INPUT", help="Video or still image.")],
@@ -121,7 +117,8 @@ def process_command(
         Path | None, typer.Option("--json", help="Per-frame JSON-lines record.")
     ] = None,
     calibration: Annotated[
-        str, typer.Option(help="Calibration JSON, or 'none' to skip undistortion.")
+        str,
+        typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion."),
     ] = str(default_calibration_path()),
     start: Annotated[float, typer.Option(help="Start time in seconds.")] = 0.0,
     end: Annotated[float | None, typer.Option(help="End time in seconds.")] = None,
@@ -137,13 +134,14 @@ def process_command(
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.assembly import build_stages
     from app.compose import ComposeOptions, compose
+    from app.outputs import plan_outputs
     from app.pipeline import Pipeline, process_still, process_video
-    from app.video import is_image
+    from app.video import check_input, is_image
 
+    check_input(source)
+    outputs = plan_outputs(source, output, record, log=lambda m: typer.echo(m, err=True))
+    output, record = outputs.media, outputs.record
     cal = _calibration(calibration)
-    output = output if output is not None else default_output(source)
-    if output.resolve() == source.resolve():
-        raise InputError("output would overwrite the input; choose another -o")
     still = is_image(source)
     stages = build_stages(lanes, vehicles, model, keep_debug=insets, still=still)
     options = ComposeOptions(insets=insets)
@@ -157,10 +155,6 @@ def process_command(
                 source, output, pipeline, record, compositor, log=lambda m: typer.echo(m, err=True)
             )
     else:
-        if is_image(output):
-            raise InputError(
-                f"output {output} is an image name but the input is a video; use an .mp4 name"
-            )
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
         with Pipeline(cal, stages=stages, workers=True) as pipeline:
             summary = process_video(source, output, pipeline, record, compositor, start, end)
@@ -178,7 +172,8 @@ def debug_command(
         Path | None, typer.Option(help="Folder (default: NAME_debug next to the input).")
     ] = None,
     calibration: Annotated[
-        str, typer.Option(help="Calibration JSON, or 'none' to skip undistortion.")
+        str,
+        typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion."),
     ] = str(default_calibration_path()),
     model: Annotated[
         Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
@@ -187,13 +182,15 @@ def debug_command(
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
     from app.debug import parse_frames, run_debug
+    from app.outputs import check_debug_folder
     from app.pipeline import Pipeline
     from app.video import check_input
 
     span = parse_frames(frames)
     check_input(source)
-    cal = _calibration(calibration)
     folder = out if out is not None else source.with_name(f"{source.stem}_debug")
+    check_debug_folder(folder, source)
+    cal = _calibration(calibration)
     pipeline = Pipeline(cal, build_stages(model=model, keep_debug=True))
     written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
@@ -207,10 +204,15 @@ def evaluate_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Score a record against hand-made labels (vehicles by IoU, lane x error per row)."""
-    from app.evaluate import evaluate, format_report, load_labels
+    from app.evaluate import clip_frames, coverage_problem, evaluate, format_report, load_labels
     from app.record import read_record
 
-    scores = evaluate(load_labels(labels), read_record(record), warmup=warmup)
+    truth = load_labels(labels)
+    frames = list(read_record(record))
+    problem = coverage_problem(truth, frames, clip_frames(labels), warmup)
+    if problem is not None:
+        raise InputError(f"cannot score {record} against {labels}: {problem}")
+    scores = evaluate(truth, frames, warmup=warmup)
     typer.echo(json.dumps(scores) if as_json else format_report(scores))
 
 
@@ -235,10 +237,12 @@ def train_command(
 
     patches = load_patches(data)
     extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
-    bar = Progress(len(patches), label="features")
+    bar = Progress(len(patches), label="features", unit="patches/s")
 
     def progress(done: int, total: int) -> None:
         bar.update(done - bar.count)
+        if done >= total:
+            bar.close()  # the training log that follows starts on its own line
 
     model = train_model(
         patches,
@@ -280,6 +284,17 @@ def evaluate_classifier_command(
         "n_vehicles": int((patches.labels == 1).sum()),
         "n_non_vehicles": int((patches.labels == 0).sum()),
     }
+    report = classifier.report
+    if (report.get("n_vehicles"), report.get("n_non_vehicles")) == (
+        summary["n_vehicles"],
+        summary["n_non_vehicles"],
+    ):
+        typer.echo(
+            f"note: {data} holds as many vehicles and non-vehicles as the model was trained on: "
+            "it is probably the training set, so these figures overstate accuracy; score a "
+            "held-out folder, or see the grouped-split figures of 'roadview train'",
+            err=True,
+        )
     if as_json:
         typer.echo(json.dumps(summary))
     else:
