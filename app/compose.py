@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -86,7 +87,7 @@ def hud_lines(lane: LaneEstimate | None, vehicles: int | None, fps: float) -> li
     if lane is None:
         lines.append("Lane: searching")
     else:
-        radius = "straight" if lane.curvature_m >= 9_999 else f"{lane.curvature_m:,.0f} m"
+        radius = "straight" if math.isinf(lane.curvature_m) else f"{lane.curvature_m:,.0f} m"
         side = "right" if lane.offset_m > 0 else "left"
         lines.append(f"Radius of curvature: {radius}")
         lines.append(f"Offset: {abs(lane.offset_m):.2f} m {side} of centre")

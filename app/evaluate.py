@@ -36,6 +36,15 @@ class FrameLabels:
     lane: dict[str, dict[int, float]]  # side -> row -> x
 
 
+def clip_frames(path: Path) -> int | None:
+    """The labelled clip's length in frames (the labels file's `frames`), if it says."""
+    try:
+        frames = json.loads(Path(path).read_text()).get("frames")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return int(frames) if isinstance(frames, int) else None
+
+
 def load_labels(path: Path) -> dict[int, FrameLabels]:
     """Labels of every frame between the first and last keyframe, interpolated as documented."""
     try:
@@ -148,6 +157,54 @@ def _lane_x(polyline: Sequence[Sequence[float]] | None, row: int) -> float | Non
     return float(np.interp(row, ys, xs))
 
 
+def coverage_problem(
+    labels: Mapping[int, FrameLabels],
+    records: Sequence[Mapping[str, Any]],
+    clip_frames: int | None,
+    warmup: int,
+) -> str | None:
+    """Why a record cannot be scored against these labels, or None when it can.
+
+    A record must hold every labelled frame that is scored, must not run past the labelled clip's
+    length, and every labelled box and lane point must lie inside its frames.
+    """
+    if not records:
+        return "the record is empty; make one with 'roadview process VIDEO --json RECORD'"
+    frames = sorted(int(r["frame"]) for r in records)
+    scored = sorted(f for f in labels if f >= warmup)
+    present = set(frames)
+    missing = [f for f in scored if f not in present]
+    if missing and frames[0] == 0 and clip_frames is not None and frames[-1] < clip_frames - 1:
+        return (
+            f"the record has frames 0-{frames[-1]} but the labelled clip has {clip_frames} "
+            "frames; the record is of another video, or was cut short with --end"
+        )
+    if missing:
+        return (
+            f"the record holds frames {frames[0]}-{frames[-1]} but the labels score frames "
+            f"{scored[0]}-{scored[-1]} ({len(missing)} of them missing); process the whole clip "
+            "(no --start/--end) and evaluate again"
+        )
+    if clip_frames is not None and frames[-1] >= clip_frames:
+        return (
+            f"the record runs to frame {frames[-1]} but the labelled clip has {clip_frames} "
+            "frames; the record is of another video"
+        )
+    sizes = {tuple(r["size"]) for r in records if "size" in r}
+    if len(sizes) == 1:
+        width, height = sizes.pop()
+        xs = [c for f in scored for v in labels[f].vehicles for c in v.box[0::2]]
+        ys = [c for f in scored for v in labels[f].vehicles for c in v.box[1::2]]
+        xs += [x for f in scored for side in labels[f].lane.values() for x in side.values()]
+        ys += [y for f in scored for side in labels[f].lane.values() for y in side]
+        if (xs and max(xs) > width * 1.02) or (ys and max(ys) > height * 1.02):
+            return (
+                f"the labels reach x {max(xs, default=0):.0f}, y {max(ys, default=0):.0f} but the "
+                f"record's frames are {width}x{height}; the record is of another size or video"
+            )
+    return None
+
+
 def evaluate(
     labels: Mapping[int, FrameLabels],
     records: Iterable[Mapping[str, Any]],
@@ -157,6 +214,26 @@ def evaluate(
     """Vehicle and lane scores over the labelled frames from `warmup` on."""
     by_frame = {int(r["frame"]): r for r in records}
     scored = sorted(f for f in labels if f >= warmup)
+    return {
+        "frames_scored": len(scored),
+        "warmup": warmup,
+        # A stage that did not run (its field absent from every frame) is not scored.
+        "vehicles": _vehicle_scores(labels, by_frame, scored, thresholds)
+        if any("vehicles" in r for r in by_frame.values())
+        else None,
+        "lane": _lane_scores(labels, by_frame, scored)
+        if any("lane" in r for r in by_frame.values())
+        else None,
+    }
+
+
+def _vehicle_scores(
+    labels: Mapping[int, FrameLabels],
+    by_frame: Mapping[int, Mapping[str, Any]],
+    scored: Sequence[int],
+    thresholds: Sequence[float],
+) -> dict[str, Any]:
+    """Precision, recall, false positives per frame and mean IoU at each IoU threshold."""
     vehicle_scores: dict[str, Any] = {}
     for threshold in thresholds:
         tp = fp = fn = 0
@@ -175,6 +252,15 @@ def evaluate(
             "false_positives": fp,
             "false_negatives": fn,
         }
+    return vehicle_scores
+
+
+def _lane_scores(
+    labels: Mapping[int, FrameLabels],
+    by_frame: Mapping[int, Mapping[str, Any]],
+    scored: Sequence[int],
+) -> dict[str, Any]:
+    """Absolute x error of the lane boundaries per labelled row; a missing lane counts outside."""
     errors: dict[int, list[float]] = {row: [] for row in LANE_ROWS}
     missing = 0
     for frame in scored:
@@ -206,25 +292,23 @@ def evaluate(
             if e
         },
     }
-    return {
-        "frames_scored": len(scored),
-        "warmup": warmup,
-        "vehicles": vehicle_scores,
-        "lane": lane_scores,
-    }
+    return lane_scores
 
 
 def format_report(scores: Mapping[str, Any]) -> str:
     """A short human-readable table of the scores."""
-    lines = [f"frames scored: {scores['frames_scored']} (warm-up {scores['warmup']})", "vehicles:"]
-    for name, v in scores["vehicles"].items():
+    lines = [f"frames scored: {scores['frames_scored']} (warm-up {scores['warmup']})"]
+    lines.append("vehicles:" if scores["vehicles"] else "vehicles: not in the record")
+    for name, v in (scores["vehicles"] or {}).items():
         lines.append(
             f"  {name:8s} precision {v['precision']:.3f}  recall {v['recall']:.3f}  "
             f"FP/frame {v['false_positives_per_frame']:.3f}  mean IoU {v['mean_iou']:.3f}  "
             f"(TP {v['true_positives']}, FP {v['false_positives']}, FN {v['false_negatives']})"
         )
     lane = scores["lane"]
-    if lane["mean_abs_error_px"] is None:
+    if lane is None:
+        lines.append("lane: not in the record")
+    elif lane["mean_abs_error_px"] is None:
         lines.append(f"lane: no lane points found ({lane['missing']} missing)")
     else:
         lines.append(

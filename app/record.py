@@ -10,13 +10,15 @@ from typing import Any, TextIO
 from app.errors import InputError
 from app.stages import StageResult
 
-EMPTY_FIELDS: dict[str, Any] = {"vehicles": [], "lane": None}
 
+def frame_record(
+    index: int, time_s: float, size: tuple[int, int], results: Mapping[str, StageResult]
+) -> dict[str, Any]:
+    """The record object for one frame; a stage that did not run has no field at all.
 
-def frame_record(index: int, time_s: float, results: Mapping[str, StageResult]) -> dict[str, Any]:
-    """The record object for one frame: fields of stages that did not run keep their empty value."""
-    record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4)}
-    record.update(EMPTY_FIELDS)
+    The fields are documented in README ("The record") and in `record.schema.json`.
+    """
+    record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4), "size": list(size)}
     for key, result in results.items():
         record[key] = result.to_record()
     return record

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,7 +34,7 @@ class LaneEstimate:
 
     left: NDArray[np.float64]  # (n, 2) x, y from the frame bottom up to the search region top
     right: NDArray[np.float64]
-    curvature_m: float
+    curvature_m: float  # radius in metres; inf on a straight road
     offset_m: float
     left_fit: Fit  # bird's-eye fits, x = a y^2 + b y + c
     right_fit: Fit
@@ -43,7 +44,7 @@ class LaneEstimate:
         return {
             "left": np.round(self.left, 1).tolist(),
             "right": np.round(self.right, 1).tolist(),
-            "curvature_m": round(self.curvature_m, 1),
+            "curvature_m": round(self.curvature_m, 1) if math.isfinite(self.curvature_m) else None,
             "offset_m": round(self.offset_m, 3),
         }
 
@@ -215,9 +216,8 @@ class LaneFinder:
         ]
         # The mean of curvatures (not radii) so one near-straight line does not dominate.
         curvature = float(np.mean([1.0 / r for r in radii]))
-        radius = (
-            min(cfg.straight_radius_m, 1.0 / curvature) if curvature > 0 else cfg.straight_radius_m
-        )
+        # Past straight_radius_m a radius cannot be told from a straight road: infinite.
+        radius = 1.0 / curvature if curvature * cfg.straight_radius_m > 1.0 else math.inf
         centre_px = float(view.to_birdseye(np.array([[w / 2, cfg.src_bottom_y * h]]))[0, 0])
         offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
         return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right)

@@ -37,6 +37,12 @@ class Detections:
     def __len__(self) -> int:
         return len(self.scores)
 
+    def clipped(self, frame_size: tuple[int, int]) -> Detections:
+        """The same detections with boxes cut to a frame of (width, height)."""
+        width, height = frame_size
+        boxes = np.clip(self.boxes, 0.0, [width, height, width, height])
+        return Detections(boxes, self.scores, self.ids)
+
     def to_record(self) -> list[dict[str, Any]]:
         """JSON-ready list: id, box (rounded pixels) and score of each detection."""
         return [

@@ -130,7 +130,8 @@ class VehicleDetector:
         )
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat_threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
-        shown = self.tracker.update(regions, (w, h))
+        # Tracks may reach past the frame's side (a car leaving); what is shown stays inside it.
+        shown = self.tracker.update(regions, (w, h)).clipped((w, h))
         debug = (
             VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat_threshold)
             if self.keep_debug
