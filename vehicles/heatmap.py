@@ -4,9 +4,33 @@ from __future__ import annotations
 
 from collections import deque
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
+
+
+def label_regions(mask: NDArray[np.bool_]) -> tuple[NDArray[np.int32], list[tuple[slice, slice]]]:
+    """4-connected regions of a mask: labels 1..n in raster order of their first pixel, and each
+    region's bounding box as (rows, columns) slices, as `scipy.ndimage.label` and `find_objects`
+    give them (OpenCV's labelling is as exact and spares the frame path scipy's import)."""
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(
+        mask.astype(np.uint8), connectivity=4, ltype=cv2.CV_32S
+    )
+    windows = [
+        (slice(int(y), int(y + h)), slice(int(x), int(x + w))) for x, y, w, h in stats[1:n, :4]
+    ]
+    return np.asarray(labels, np.int32), windows
+
+
+def mean_filter(image: NDArray[np.float32], size: int) -> NDArray[np.float32]:
+    """Mean over size x size neighbourhoods, borders mirrored (scipy's 'reflect')."""
+    return np.asarray(cv2.blur(image, (size, size), borderType=cv2.BORDER_REFLECT), np.float32)
+
+
+def max_filter(image: NDArray[np.float32], size: int) -> NDArray[np.float32]:
+    """Maximum over size x size neighbourhoods (mirrored borders add no new values)."""
+    kernel = np.ones((size, size), np.uint8)
+    return np.asarray(cv2.dilate(image, kernel, borderType=cv2.BORDER_REFLECT), np.float32)
 
 
 def box_heat(
@@ -31,10 +55,11 @@ def split_peaks(
 ) -> list[NDArray[np.bool_]]:
     """Split a region into one part per heat peak when the peaks are separated by a clear valley."""
     # Smoothed heat, and only peaks reaching half the strongest: plateau bumps are not vehicles.
-    local = ndimage.uniform_filter(heat * region, size=3) * region
-    peaks = (local == ndimage.maximum_filter(local, size=5)) & region
+    local = mean_filter(np.asarray(heat * region, np.float32), 3) * region
+    peaks = (local == max_filter(local, 5)) & region
     peaks &= local >= 0.5 * local.max()
-    labels, n = ndimage.label(peaks)
+    labels, windows = label_regions(peaks)
+    n = len(windows)
     if n < 2:
         return [region]
     # Peak plateaus are tiny: their pixel coordinates give centre and value without a full sort.
@@ -140,11 +165,9 @@ class Heatmap:
         """
         persistent = self.combined > self.threshold
         heat = self.current
-        labels, _ = ndimage.label(heat > self.recent_threshold)
+        labels, windows = label_regions(heat > self.recent_threshold)
         boxes, peaks = [], []
-        for index, window in enumerate(ndimage.find_objects(labels), start=1):
-            if window is None:
-                continue
+        for index, window in enumerate(windows, start=1):
             # Work inside the region's bounding box (a few hundred pixels, not the whole map).
             local_heat, local_persistent = heat[window], persistent[window]
             region = labels[window] == index

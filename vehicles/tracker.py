@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
+from vehicles.assignment import linear_sum_assignment
 from vehicles.detections import Detections, inside_share, iou_matrix
 
 
