@@ -66,10 +66,21 @@ def _count_pngs(path: Path) -> int:
         return sum(1 for name in archive.namelist() if name.lower().endswith(".png"))
 
 
+def _part(relative: str) -> str:
+    """The part of the data set a file belongs to: its folder, or the file itself at the top."""
+    folder, _, _ = relative.rpartition("/")
+    return f"{folder}/" if folder else relative
+
+
 def gather(source: Path, dest: Path, log: Callable[[str], None] = print) -> int:
-    """Copy or download every item into dest (skipping ones already there); return files added."""
+    """Copy or download every item into dest (skipping ones already there); return files added.
+
+    What is still missing is logged as one short line per part of the data set (a folder or a
+    zip), and the error says how many parts; after one failed download no other is tried.
+    """
     added = 0
-    problems: list[str] = []
+    missing: dict[str, list[str]] = {}  # part -> reasons, one per missing file
+    offline: str | None = None
     for item in _items():
         target = dest / item.relative
         origin = source / item.relative
@@ -81,16 +92,20 @@ def gather(source: Path, dest: Path, log: Callable[[str], None] = print) -> int:
             added += 1
         elif target.exists():
             continue
-        elif item.url is not None:
+        elif item.url is None:
+            missing.setdefault(_part(item.relative), []).append("only in the shared data folder")
+        elif offline is not None:
+            missing.setdefault(_part(item.relative), []).append(offline)
+        else:
             log(f"downloading {item.url}")
             target.parent.mkdir(parents=True, exist_ok=True)
             try:
                 _download(item.url, target)
                 added += 1
             except OSError as error:
-                problems.append(f"{item.relative} (download failed: {error})")
-        else:
-            problems.append(f"{item.relative} (only in the shared data folder)")
+                reason = getattr(error, "reason", None) or error.strerror or error
+                offline = f"download failed: {reason}"
+                missing.setdefault(_part(item.relative), []).append(offline)
     for name, expected in EXPECTED_ZIP_PNGS.items():
         path = dest / name
         if path.exists():
@@ -99,10 +114,13 @@ def gather(source: Path, dest: Path, log: Callable[[str], None] = print) -> int:
             except zipfile.BadZipFile:
                 found = -1
             if found != expected:
-                problems.append(f"{name} holds {found} PNGs, expected {expected}")
-    if problems:
+                missing.setdefault(name, []).append(f"holds {found} PNGs, expected {expected}")
+    for part, reasons in missing.items():
+        count = f"{len(reasons)} files" if len(reasons) > 1 else "1 file"
+        log(f"missing {part}: {count} ({'; '.join(sorted(set(reasons)))})")
+    if missing:
         raise InputError(
-            f"data incomplete in {dest}: {'; '.join(problems)}. "
-            f"Put the shared data folder at {source} (see README) or check the network"
+            f"data incomplete: {len(missing)} parts missing (listed above); put the shared "
+            "data folder beside the checkout (README, Data) or check the network"
         )
     return added

@@ -8,11 +8,15 @@ from typing import TextIO
 
 
 class Progress:
-    """Redraws `label [#####.....] i/n  fps` on stderr at most ten times a second."""
+    """Redraws `label [#####.....] i/n  rate unit` on stderr at most ten times a second."""
 
-    def __init__(self, total: int, label: str = "", stream: TextIO | None = None) -> None:
+    def __init__(
+        self, total: int, label: str = "", stream: TextIO | None = None, unit: str = "fps"
+    ) -> None:
         self.total = max(total, 1)
         self.label = label
+        self.unit = unit
+        self.closed = False
         self.stream = stream if stream is not None else sys.stderr
         self.enabled = self.stream.isatty()
         self.count = 0
@@ -35,12 +39,13 @@ class Progress:
             filled = int(width * min(self.count / self.total, 1.0))
             bar = "#" * filled + "." * (width - filled)
             self.stream.write(
-                f"\r{self.label} [{bar}] {self.count}/{self.total} {self.fps:5.1f} fps"
+                f"\r{self.label} [{bar}] {self.count}/{self.total} {self.fps:5.1f} {self.unit}"
             )
             self.stream.flush()
 
     def close(self) -> None:
-        """End the line."""
-        if self.enabled:
+        """End the line (once), so what is printed next starts on a line of its own."""
+        if self.enabled and not self.closed:
             self.stream.write("\n")
             self.stream.flush()
+        self.closed = True
