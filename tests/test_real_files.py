@@ -1,0 +1,288 @@
+"""The kinds of files users have: rotated phone video, odd sizes, other containers, audio of any
+length; outputs that must never overwrite the input or each other; the record's schema."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+
+from app.video import ffmpeg_binary, probe_video, read_frames
+from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
+
+SCHEMA = json.loads((Path(__file__).parents[1] / "app" / "record.schema.json").read_text())
+
+
+def ffmpeg(*args: str | Path) -> None:
+    """Run ffmpeg quietly; the test fails if it does."""
+    subprocess.run([ffmpeg_binary(), "-y", "-loglevel", "error", *map(str, args)], check=True)
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str, Path]:
+    """Files a user might have, each made from the 38-frame test clip."""
+    d = tmp_path_factory.mktemp("made")
+    clip = test_video
+    files = {name: d / name for name in ("rotated.mp4", "odd.mp4", "clip.webm", "clip.ts")}
+    ffmpeg("-display_rotation:v:0", "90", "-i", clip, "-c", "copy", files["rotated.mp4"])
+    # x264 takes odd sizes in 4:4:4 only; roadview must still write its 4:2:0 output.
+    ffmpeg(
+        "-i", clip, "-vf", "scale=1279:719", "-t", "0.4", "-pix_fmt", "yuv444p", files["odd.mp4"]
+    )
+    ffmpeg("-i", clip, "-t", "0.4", "-c:v", "libvpx-vp9", "-deadline", "realtime", "-cpu-used",
+           "8", "-c:a", "libopus", files["clip.webm"])  # fmt: skip
+    ffmpeg("-i", clip, "-t", "0.4", "-c:v", "libx264", "-c:a", "aac", files["clip.ts"])
+    audio = {
+        "short": ("sine=d=0.5", []),
+        "long": ("sine=d=6", []),
+        "rate8k": ("sine=d=1.52:sample_rate=8000", []),
+        "rate44k": ("sine=d=1.2:sample_rate=44100", ["-ac", "2"]),
+    }
+    for name, (source, extra) in audio.items():
+        files[name] = d / f"audio_{name}.mp4"
+        ffmpeg("-i", clip, "-f", "lavfi", "-i", source, "-map", "0:v", "-map", "1:a", "-c:v",
+               "copy", "-c:a", "aac", *extra, files[name])  # fmt: skip
+    files["silent"] = d / "silent.mp4"
+    ffmpeg("-i", clip, "-an", "-c:v", "copy", files["silent"])
+    return files
+
+
+def test_rotated_video_is_processed_upright(made: dict[str, Path], tmp_path: Path) -> None:
+    info = probe_video(made["rotated.mp4"])
+    assert info.rotation == 90 and info.size == (720, 1280)
+    upright = next(read_frames(made["rotated.mp4"], info))
+    plain = next(read_frames(made["silent"], probe_video(made["silent"])))
+    # The decoded frame is the stored one turned a quarter: no scrambled rows.
+    turned = [np.abs(np.rot90(plain, k).astype(int) - upright).mean() for k in (1, 3)]
+    assert min(turned) < 2.0, turned
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli(
+        "process", made["rotated.mp4"], "-o", out, "--json", record, "--calibration", "none",
+        "--no-lanes", "--no-vehicles",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    out_info, frames = count_frames(out)
+    assert out_info.size == (720, 1280) and frames == 38
+    written = next(read_frames(out, out_info)).astype(int)
+    assert np.abs(written[100:] - upright[100:]).mean() < 3.0  # below the panel: same picture
+    rows = read_record(record)
+    assert len(rows) == 38 and all(r["size"] == [720, 1280] for r in rows)
+
+
+def test_rotated_video_with_the_landscape_calibration_says_why(
+    made: dict[str, Path], tmp_path: Path
+) -> None:
+    result = run_cli("process", made["rotated.mp4"], "-o", tmp_path / "o.mp4")
+    assert_one_line_error(result, "720x1280", "--calibration none")
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.mark.parametrize(
+    ("options", "fragment"),
+    [
+        (["-o", "{out}/y.mp4", "--json", "{input}"], "is the input"),
+        (["-o", "{out}/x.mp4", "--json", "{out}/x.mp4"], "also the -o output"),
+        (["-o", "{input}"], "is the input"),
+        (["-o", "{out}/x.flv"], "one of .avi"),
+        (["-o", "{out}/x.png"], "image name"),
+        (["-o", "/proc/roadview/x.mp4"], "/proc/roadview"),
+        (["--json", "{out}"], "is a folder"),
+    ],
+)
+def test_outputs_never_overwrite_the_input_or_each_other(
+    made: dict[str, Path], tmp_path: Path, options: list[str], fragment: str
+) -> None:
+    source = tmp_path / "clip.mp4"
+    source.write_bytes(made["silent"].read_bytes())
+    before = _digest(source)
+    out = tmp_path / "out"
+    out.mkdir()
+    args = [o.format(input=source, out=out) for o in options]
+    assert_one_line_error(run_cli("process", source, *args), fragment)
+    assert _digest(source) == before
+    assert not list(out.iterdir())
+
+
+def test_output_folder_gets_the_default_name(made: dict[str, Path], tmp_path: Path) -> None:
+    result = run_cli("process", made["odd.mp4"], "-o", tmp_path, "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "odd_roadview.mp4").exists()
+
+
+def test_still_to_a_video_name_and_debug_onto_the_input(
+    data_dir: Path, made: dict[str, Path], tmp_path: Path
+) -> None:
+    still = data_dir / "test_images" / "test1.jpg"
+    assert_one_line_error(run_cli("process", still, "-o", tmp_path / "x.mp4"), "x.mp4", ".png")
+    source = tmp_path / "clip.mp4"
+    source.write_bytes(made["silent"].read_bytes())
+    result = run_cli("debug", source, "--frames", "0:1", "--out", source)
+    assert_one_line_error(result, "is the input")
+    assert _digest(source) == _digest(made["silent"])
+
+
+def test_odd_frame_size_is_encoded_with_input_coordinates(
+    made: dict[str, Path], tmp_path: Path
+) -> None:
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli("process", made["odd.mp4"], "-o", out, "--json", record)
+    assert result.returncode == 0, result.stderr
+    info, frames = count_frames(out)
+    assert info.size == (1280, 720) and frames == probe_video(made["odd.mp4"]).n_frames
+    for row in read_record(record):
+        assert row["size"] == [1279, 719]
+        for vehicle in row.get("vehicles", []):
+            x1, y1, x2, y2 = vehicle["box"]
+            assert 0 <= x1 < x2 <= 1279 and 0 <= y1 < y2 <= 719
+
+
+def test_webm_in_webm_out_and_other_containers_default_to_mp4(
+    made: dict[str, Path], tmp_path: Path
+) -> None:
+    source = tmp_path / "clip.webm"
+    source.write_bytes(made["clip.webm"].read_bytes())
+    result = run_cli("process", source, "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    written = tmp_path / "clip_roadview.webm"
+    assert count_frames(written)[1] == 10
+    header = subprocess.run(
+        [ffmpeg_binary(), "-hide_banner", "-i", str(written)], capture_output=True, text=True
+    ).stderr
+    assert "vp9" in header and "opus" in header
+    ts = tmp_path / "clip.ts"
+    ts.write_bytes(made["clip.ts"].read_bytes())
+    result = run_cli("process", ts, "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    assert "writing .mp4" in result.stderr
+    assert count_frames(tmp_path / "clip_roadview.mp4")[1] == probe_video(ts).n_frames
+
+
+@pytest.mark.parametrize("audio", ["short", "long", "rate8k", "rate44k", "silent"])
+def test_every_frame_is_written_whatever_the_audio(
+    made: dict[str, Path], tmp_path: Path, audio: str
+) -> None:
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    # run_cli's timeout ends a hang; 38 frames take a few seconds.
+    result = run_cli("process", made[audio], "-o", out, "--json", record, "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    info, frames = count_frames(out)
+    assert frames == len(read_record(record)) == 38
+    assert info.has_audio == (audio != "silent")
+    header = subprocess.run(
+        [ffmpeg_binary(), "-hide_banner", "-i", str(out)], capture_output=True, text=True
+    ).stderr
+    duration = header.split("Duration: ")[1].split(",")[0]
+    h, m, s = duration.split(":")
+    # A longer audio track is cut to the video; a shorter one never cuts the video.
+    assert abs(int(h) * 3600 + int(m) * 60 + float(s) - 1.52) < 0.1
+
+
+def test_data_without_source_or_network_lists_missing_parts(tmp_path: Path) -> None:
+    env = {**os.environ, "http_proxy": "http://127.0.0.1:9", "https_proxy": "http://127.0.0.1:9"}
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "app",
+            "data",
+            "--source",
+            str(tmp_path / "none"),
+            "--dest",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert result.returncode != 0
+    missing = [line for line in result.stderr.splitlines() if line.startswith("missing ")]
+    assert {line.split(":")[0] for line in missing} >= {
+        "missing vehicles.zip",
+        "missing camera_cal/",
+        "missing labels/",
+    }
+    assert all(len(line) < 160 for line in result.stderr.splitlines())
+    assert "Traceback" not in result.stderr
+
+
+def test_help_has_no_type_tags() -> None:
+    for command in ("process", "debug", "train", "evaluate", "data"):
+        result = run_cli(command, "--help")
+        assert result.returncode == 0
+        assert "<bool>" not in result.stdout and "╭" not in result.stdout
+
+
+def test_records_follow_the_shipped_schema(
+    test_video: Path, data_dir: Path, tmp_path: Path
+) -> None:
+    validator = jsonschema.Draft202012Validator(SCHEMA)
+    runs: dict[str, list[str | Path]] = {
+        "both": ["process", test_video, "-o", tmp_path / "a.mp4", "--json", tmp_path / "a.jsonl"],
+        "lanes": ["process", test_video, "-o", tmp_path / "b.mp4", "--json", tmp_path / "b.jsonl",
+                  "--no-vehicles", "--end", "0.4"],
+        "still": ["process", data_dir / "test_images" / "test1.jpg", "-o", tmp_path / "c.png",
+                  "--json", tmp_path / "c.jsonl"],
+    }  # fmt: skip
+    for name, args in runs.items():
+        result = run_cli(*args)
+        assert result.returncode == 0, result.stderr
+        rows = read_record(Path(str(args[args.index("--json") + 1])))
+        for row in rows:
+            validator.validate(row)
+            width, height = row["size"]
+            for vehicle in row.get("vehicles", []):
+                x1, y1, x2, y2 = vehicle["box"]
+                assert 0 <= x1 < x2 <= width and 0 <= y1 < y2 <= height
+        if name == "lanes":
+            assert all("vehicles" not in r and "lane" in r for r in rows)
+        else:
+            assert all("vehicles" in r for r in rows)
+    # The schema rejects what the README says a record never holds.
+    bad = dict(read_record(tmp_path / "a.jsonl")[20])
+    assert bad["vehicles"], "the clip has vehicles at frame 20"
+    bad["vehicles"] = [{**bad["vehicles"][0], "box": [1, 2, 3]}]
+    assert not validator.is_valid(bad)
+    assert not validator.is_valid({**bad, "lane": {"curvature_m": 10000}})
+
+
+def test_evaluate_refuses_a_record_that_does_not_cover_the_labels(
+    data_dir: Path, test_video: Path, tmp_path: Path
+) -> None:
+    labels = data_dir / "labels" / "test_video.json"
+    part = tmp_path / "part.jsonl"
+    result = run_cli(
+        "process",
+        test_video,
+        "-o",
+        tmp_path / "p.mp4",
+        "--json",
+        part,
+        "--start",
+        "1",
+        "--end",
+        "2",
+    )
+    assert result.returncode == 0, result.stderr
+    assert_one_line_error(run_cli("evaluate", "--labels", labels, "--record", part), "--start")
+    # A record of another clip: longer than the labelled one, or of another frame size.
+    other = tmp_path / "other.jsonl"
+    rows = [{"frame": i, "time_s": i / 25, "size": [1280, 720], "vehicles": []} for i in range(88)]
+    other.write_text("\n".join(json.dumps(r) for r in rows))
+    assert_one_line_error(
+        run_cli("evaluate", "--labels", labels, "--record", other), "another video"
+    )
+    small = tmp_path / "small.jsonl"
+    rows = [{**r, "size": [640, 360]} for r in rows[:38]]
+    small.write_text("\n".join(json.dumps(r) for r in rows))
+    assert_one_line_error(run_cli("evaluate", "--labels", labels, "--record", small), "640x360")
