@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
-from app.stages import FrameStage
+from app.stages import FrameStage, StageResult
+from app.video import Frame
 
 
 def build_stages(
@@ -34,3 +36,17 @@ def build_stages(
             VehicleDetector(classifier, config, keep_debug=keep_debug, interleave=not still)
         )
     return stages
+
+
+def make_compositor(
+    insets: bool = False,
+) -> Callable[[Frame, Mapping[str, StageResult], float], Frame]:
+    """The compositor `process` and `batch` draw with."""
+    from app.compose import ComposeOptions, compose
+
+    options = ComposeOptions(insets=insets)
+
+    def compositor(frame: Frame, results: Mapping[str, StageResult], fps: float) -> Frame:
+        return compose(frame, results, fps, options)
+
+    return compositor

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import sys
 import traceback
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated
 
@@ -13,8 +12,6 @@ import typer
 
 from app.errors import InputError
 from app.runtime import tune_process
-from app.stages import StageResult
-from app.video import Frame
 from camera_cal import (
     Calibration,
     CalibrationError,
@@ -132,8 +129,7 @@ def process_command(
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
-    from app.assembly import build_stages
-    from app.compose import ComposeOptions, compose
+    from app.assembly import build_stages, make_compositor
     from app.outputs import plan_outputs
     from app.pipeline import Pipeline, process_still, process_video
     from app.video import check_input, is_image
@@ -144,11 +140,7 @@ def process_command(
     cal = _calibration(calibration)
     still = is_image(source)
     stages = build_stages(lanes, vehicles, model, keep_debug=insets, still=still)
-    options = ComposeOptions(insets=insets)
-
-    def compositor(frame: Frame, results: Mapping[str, StageResult], fps: float) -> Frame:
-        return compose(frame, results, fps, options)
-
+    compositor = make_compositor(insets)
     if still:
         with Pipeline(cal, stages=stages) as pipeline:
             summary = process_still(
@@ -162,6 +154,85 @@ def process_command(
         f"wrote {summary.output} ({summary.frames} frames, {summary.fps:.1f} fps)"
         + (f" and {summary.record}" if summary.record else "")
     )
+
+
+@cli.command("batch")
+def batch_command(
+    inputs: Annotated[
+        list[Path],
+        typer.Argument(metavar="INPUTS...", help="Videos, folders (searched) or .txt lists."),
+    ],
+    out: Annotated[Path, typer.Option("--out", help="Output folder.")],
+    scheduler: Annotated[
+        str | None, typer.Option(help="A running Dask scheduler, e.g. tcp://HOST:8786.")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Local worker processes (default: one per core).")
+    ] = None,
+    video: Annotated[
+        bool, typer.Option("--video/--no-video", help="Write annotated videos.")
+    ] = True,
+    force: Annotated[bool, typer.Option(help="Redo inputs already done.")] = False,
+    calibration: Annotated[
+        str,
+        typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion."),
+    ] = str(default_calibration_path()),
+    model: Annotated[
+        Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
+    ] = None,
+) -> None:
+    """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
+    import os
+
+    from app.batch import BatchOptions, find_inputs, iter_rows, run_batch
+    from app.progress import Progress
+
+    entries = find_inputs(inputs)
+    if not entries:
+        raise InputError("no video files found in the inputs; pass videos, folders or a .txt list")
+    _calibration(calibration)  # a bad calibration fails here, once, not in every task
+    options = BatchOptions(
+        out=out.resolve(),
+        video=video,
+        calibration=None if calibration.lower() == "none" else str(Path(calibration).resolve()),
+        model=str(model.resolve()) if model is not None else None,
+    )
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except OSError as error:
+            raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({error})") from None
+        cluster = None
+    else:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        cluster = LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0"
+        )
+        client = Client(cluster)
+    typer.echo(f"dashboard: {client.dashboard_link}", err=True)
+    bar = Progress(len(entries), label="videos", unit="videos/s")
+    frames = 0
+
+    def on_row(row: object) -> None:
+        nonlocal frames
+        frames += getattr(row, "frames", 0)
+        bar.update()
+        if getattr(row, "status", "") == "failed":
+            typer.echo(f"\nfailed {row.path}: {row.error}", err=True)  # type: ignore[attr-defined]
+
+    try:
+        summary = run_batch(entries, options, client, force=force, on_row=on_row)
+    finally:
+        bar.close()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    for line in iter_rows(summary):
+        typer.echo(line)
+    if summary.failed:
+        raise typer.Exit(1)
 
 
 @cli.command("debug")

@@ -176,7 +176,7 @@ class RunSummary:
 
     frames: int
     seconds: float
-    output: Path
+    output: Path | None
     record: Path | None
 
     @property
@@ -198,14 +198,16 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
 
 def process_video(
     source: Path,
-    output: Path,
+    output: Path | None,
     pipeline: Pipeline,
     record: Path | None = None,
     compositor: Compositor = plain_compositor,
     start_s: float = 0.0,
     end_s: float | None = None,
 ) -> RunSummary:
-    """Process a video into an annotated video (and record); outputs appear only on success."""
+    """Process a video into an annotated video and/or a record; outputs appear only on success.
+
+    With `output` None no video is composed or encoded (the record alone)."""
     warm_up = warm_up_opencv()
     try:
         info = probe_video(source)
@@ -219,18 +221,19 @@ def process_video(
     progress = Progress(last - first, label=source.name)
     with ExitStack() as outputs:
         # Temporary files are renamed into place only when the block ends without an error.
-        video_tmp = outputs.enter_context(atomic_output(output))
         handle: TextIO | None = None
         if record is not None:
             handle = outputs.enter_context(outputs.enter_context(atomic_output(record)).open("w"))
-        writer = VideoWriter(
-            video_tmp,
-            info.size,
-            info.fps,
-            audio_from=source if info.has_audio else None,
-            audio_start_s=first / info.fps,
-            audio_seconds=(last - first) / info.fps,
-        )
+        writer = None
+        if output is not None:
+            writer = VideoWriter(
+                outputs.enter_context(atomic_output(output)),
+                info.size,
+                info.fps,
+                audio_from=source if info.has_audio else None,
+                audio_start_s=first / info.fps,
+                audio_seconds=(last - first) / info.fps,
+            )
         try:
             # Without --end every decoded frame is read (the probed count is an estimate).
             decoded = prefetch(
@@ -238,11 +241,11 @@ def process_video(
             )
             for offset, out in enumerate(pipeline.stream(decoded)):
                 index = first + offset
-                writer.write(compositor(out.undistorted, out.results, progress.fps))
+                if writer is not None:
+                    writer.write(compositor(out.undistorted, out.results, progress.fps))
                 if handle is not None:
-                    write_record_line(
-                        handle, frame_record(index, index / info.fps, info.size, out.results)
-                    )
+                    line = frame_record(index, index / info.fps, info.size, out.results)
+                    write_record_line(handle, line)
                 count += 1
                 progress.update()
             progress.close()
@@ -253,9 +256,11 @@ def process_video(
                     "re-export or re-download the video"
                 )
         except BaseException:
-            writer.abort()
+            if writer is not None:
+                writer.abort()
             raise
-        writer.close()
+        if writer is not None:
+            writer.close()
     return RunSummary(count, time.perf_counter() - started, output, record)
 
 
