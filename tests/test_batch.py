@@ -1,0 +1,183 @@
+"""`roadview batch` on Dask: a local cluster, a real scheduler and workers, a worker killed."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from tests.helpers import read_record, run_cli
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory: pytest.TempPathFactory, data_dir: Path) -> Path:
+    """The three shared clips and a corrupt one, in a folder with a subfolder."""
+    folder = tmp_path_factory.mktemp("inputs")
+    (folder / "sub").mkdir()
+    for name in ("test_video", "project_cut_1"):
+        (folder / f"{name}.mp4").write_bytes((data_dir / "videos" / f"{name}.mp4").read_bytes())
+    cut2 = (data_dir / "videos" / "project_cut_2.mp4").read_bytes()
+    (folder / "sub" / "project_cut_2.mp4").write_bytes(cut2)
+    test_video = (data_dir / "videos" / "test_video.mp4").read_bytes()
+    (folder / "broken.mp4").write_bytes(test_video[:400_000])
+    return folder
+
+
+def _manifest(out: Path) -> dict[str, dict[str, object]]:
+    return {
+        Path(str(r["path"])).name: r
+        for r in pq.read_table(out / "table/manifest.parquet").to_pylist()
+    }
+
+
+def test_local_cluster_three_done_one_failed_then_all_skipped(
+    inputs: Path, data_dir: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    result = run_cli("batch", inputs, "--out", out, "--workers", "2", "--no-video")
+    assert result.returncode == 1, result.stderr  # one input failed
+    assert "3 done, 1 failed, 0 skipped" in result.stdout
+    rows = _manifest(out)
+    assert {n: r["status"] for n, r in rows.items()} == {
+        "test_video.mp4": "done",
+        "project_cut_1.mp4": "done",
+        "project_cut_2.mp4": "done",
+        "broken.mp4": "failed",
+    }
+    assert "truncated or damaged" in str(rows["broken.mp4"]["error"])
+    assert rows["project_cut_2.mp4"]["frames"] == 88
+    assert abs(float(rows["project_cut_2.mp4"]["video_seconds"]) - 3.52) < 0.01  # type: ignore[arg-type]
+    # Outputs mirror the inputs' relative paths; records equal those of `roadview process`.
+    record = out / "sub" / "project_cut_2.jsonl"
+    alone = tmp_path / "alone.jsonl"
+    single = run_cli(
+        "process",
+        data_dir / "videos" / "project_cut_2.mp4",
+        "-o",
+        tmp_path / "a.mp4",
+        "--json",
+        alone,
+    )
+    assert single.returncode == 0, single.stderr
+    assert record.read_text() == alone.read_text()
+    frames = pq.read_table(out / "table" / "frames").to_pylist()
+    vehicles = pq.read_table(out / "table" / "vehicles").to_pylist()
+    assert len(frames) == 38 + 76 + 88
+    lines = read_record(record)
+    assert sum(1 for f in frames if f["video"] == "sub/project_cut_2.mp4") == len(lines)
+    assert sum(1 for v in vehicles if v["video"] == "sub/project_cut_2.mp4") == sum(
+        len(r["vehicles"]) for r in lines
+    )
+    assert not list(out.rglob("*.tmp*"))
+    again = run_cli("batch", inputs, "--out", out, "--workers", "2", "--no-video")
+    assert "0 done, 1 failed, 3 skipped" in again.stdout, again.stdout
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _worker_running_ffmpeg() -> int | None:
+    """The pid of a process whose child is an ffmpeg decoding frames (a Dask worker at work)."""
+    for proc in Path("/proc").iterdir():
+        try:
+            args = (proc / "cmdline").read_bytes().split(b"\0")
+            if args and b"ffmpeg" in args[0] and b"rawvideo" in args:
+                stat = (proc / "stat").read_text()
+                return int(stat.rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    return None
+
+
+def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path) -> None:
+    bin_dir = Path(sys.executable).parent
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    logs = (tmp_path / "scheduler.log").open("w")
+    procs = [
+        subprocess.Popen(
+            [
+                str(bin_dir / "dask"),
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--dashboard-address",
+                ":0",
+            ],
+            stdout=logs,
+            stderr=logs,
+        )
+    ]
+    try:
+        for _ in range(2):
+            procs.append(
+                subprocess.Popen(
+                    [
+                        str(bin_dir / "dask"),
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-nanny" if False else "--nanny",
+                    ],
+                    stdout=logs,
+                    stderr=logs,
+                )
+            )
+        time.sleep(4)
+        out = tmp_path / "out"
+        batch = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "app",
+                "batch",
+                str(inputs),
+                "--out",
+                str(out),
+                "--scheduler",
+                address,
+                "--no-video",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        # Kill one worker's process while it works on a video: Dask retries the task elsewhere.
+        deadline = time.time() + 60
+        killed = False
+        while time.time() < deadline and not killed:
+            worker = _worker_running_ffmpeg()
+            if worker is not None:
+                os.kill(worker, signal.SIGKILL)
+                killed = True
+            time.sleep(0.1)
+        stdout, stderr = batch.communicate(timeout=300)
+        assert killed
+        assert "3 done, 1 failed" in stdout, stdout + stderr
+        rows = _manifest(out)
+        assert sum(r["status"] == "done" for r in rows.values()) == 3
+        assert not list(out.rglob("*.tmp*"))
+    finally:
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        logs.close()
