@@ -4,9 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from app.stages import FrameStage, StageResult
 from app.video import Frame
+
+if TYPE_CHECKING:
+    from vehicles.model import VehicleModel
 
 
 def build_stages(
@@ -15,10 +19,12 @@ def build_stages(
     model: Path | None = None,
     keep_debug: bool = False,
     still: bool = False,
+    classifier: VehicleModel | None = None,
 ) -> list[FrameStage]:
     """The lane and vehicle stages that are switched on, in pipeline order.
 
     For a still there is no history: every band is searched and nothing waits for confirmation.
+    A `classifier` already loaded is used instead of loading `model`.
     """
     stages: list[FrameStage] = []
     if lanes:
@@ -30,7 +36,7 @@ def build_stages(
         from vehicles.detector import VehicleDetector
         from vehicles.model import load_model
 
-        classifier = load_model(model)
+        classifier = classifier if classifier is not None else load_model(model)
         config = DetectorConfig().for_still() if still else DetectorConfig()
         stages.append(
             VehicleDetector(classifier, config, keep_debug=keep_debug, interleave=not still)

@@ -9,18 +9,24 @@ run resumes where it stopped.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
 import socket
 import time
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 from app.atomic import atomic_output
-from app.errors import InputError
+from app.errors import InputError, Interrupted
+from app.progress import Progress
+
+if TYPE_CHECKING:
+    from vehicles.model import VehicleModel
 
 VIDEO_SUFFIXES = frozenset(
     {".mp4", ".m4v", ".mov", ".mkv", ".avi", ".webm", ".ts", ".mts", ".flv", ".wmv", ".mpg"}
@@ -106,6 +112,15 @@ def outputs_of(entry: BatchInput, out: Path) -> tuple[Path, Path]:
     return base.with_name(f"{base.stem}_roadview.mp4"), base.with_name(f"{base.stem}.jsonl")
 
 
+def remove_temporaries(entry: BatchInput, out: Path) -> None:
+    """Delete the temporary files an interrupted or killed task left for this input's outputs."""
+    video, record = outputs_of(entry, out)
+    parts = [out / TABLE / t / f"{_key(entry)}.parquet" for t in ("frames", "vehicles")]
+    for target in (video, record, *parts):
+        for stale in target.parent.glob(f".{target.stem}.*.tmp{target.suffix}"):
+            stale.unlink(missing_ok=True)
+
+
 def _key(entry: BatchInput) -> str:
     """File name of the input's table parts: its relative path, flattened."""
     return hashlib.blake2b(str(entry.relative).encode(), digest_size=8).hexdigest()
@@ -145,6 +160,14 @@ def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str
     )
 
 
+@functools.cache
+def _classifier(model: str | None) -> VehicleModel:
+    """The vehicle model, loaded once per worker process (0.15 s saved on every later video)."""
+    from vehicles.model import load_model
+
+    return load_model(Path(model) if model else None)
+
+
 def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     """Process one video as `roadview process` does, then write its table parts."""
     from app.assembly import build_stages, make_compositor
@@ -153,18 +176,10 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     from camera_cal import load_calibration
 
     tune_process()
+    remove_temporaries(entry, options.out)  # a killed earlier try leaves them behind
     video, record = outputs_of(entry, options.out)
-    table = options.out / TABLE
-    targets = [
-        video,
-        record,
-        *(table / t / f"{_key(entry)}.parquet" for t in ("frames", "vehicles")),
-    ]
-    for target in targets:  # a killed earlier try leaves its temporary files: remove them
-        for stale in target.parent.glob(f".{target.stem}.*.tmp{target.suffix}"):
-            stale.unlink(missing_ok=True)
     calibration = load_calibration(Path(options.calibration)) if options.calibration else None
-    stages = build_stages(model=Path(options.model) if options.model else None)
+    stages = build_stages(classifier=_classifier(options.model))
     with Pipeline(calibration, stages=stages) as pipeline:
         summary = process_video(
             entry.path, video if options.video else None, pipeline, record, make_compositor()
@@ -265,21 +280,47 @@ class BatchSummary:
     wall_seconds: float
 
 
+@contextmanager
+def dask_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+    """A client of the scheduler at `scheduler`, or of a local cluster of `workers` processes."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except OSError as error:
+            raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({error})") from None
+        with client:
+            yield client
+        return
+    n = workers if workers is not None else (os.cpu_count() or 1)
+    if n < 1:
+        raise InputError("--workers must be at least 1")
+    cluster = LocalCluster(
+        n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0"
+    )
+    with cluster, Client(cluster) as client:
+        yield client
+
+
 def run_batch(
     entries: list[BatchInput],
     options: BatchOptions,
-    client: Any,
+    scheduler: str | None = None,
+    workers: int | None = None,
     force: bool = False,
-    on_row: Callable[[ManifestRow], None] = lambda row: None,
+    log: Callable[[str], None] = lambda message: None,
 ) -> BatchSummary:
-    """Submit every input not already done to the Dask `client` and keep the manifest current."""
-    from distributed import as_completed
+    """Run every input not already done on Dask, keeping the manifest current after each one.
 
+    Ctrl-C cancels what is left, keeps what finished (the manifest says which) and raises
+    `Interrupted`; the next run resumes.
+    """
     table = options.out / TABLE
     earlier = read_manifest(table)
     manifest: dict[str, ManifestRow] = dict(earlier)
     started = time.perf_counter()
-    futures = []
+    todo: list[tuple[BatchInput, int, str]] = []
     skipped = 0
     for entry in entries:
         size = entry.path.stat().st_size if entry.path.exists() else 0
@@ -296,31 +337,95 @@ def run_batch(
         ):
             manifest[str(entry.path)] = ManifestRow(**{**asdict(old), "status": "skipped"})
             skipped += 1
-            continue
-        futures.append(
-            client.submit(
-                process_one, entry, options, size, digest, key=f"video-{_key(entry)}", pure=False
-            )
-        )
+        else:
+            todo.append((entry, size, digest))
+    # Largest first: a long video started last would leave the other workers idle at the end.
+    todo.sort(key=lambda item: -item[1])
+    progress = BatchProgress([size for _, size, _ in todo])
     done = failed = frames = 0
     video_seconds = 0.0
+    finished: set[str] = set()
+    interrupted = False
     try:
-        for future in as_completed(futures):
-            row: ManifestRow = future.result()
-            manifest[row.path] = row
-            write_manifest(table, manifest.values())
-            if row.status == "done":
-                done += 1
-                frames += row.frames
-                video_seconds += row.video_seconds
-            else:
-                failed += 1
-            on_row(row)
+        with dask_client(scheduler, workers) as client:
+            from distributed import as_completed
+
+            log(f"dashboard: {client.dashboard_link}")
+            futures = [
+                client.submit(
+                    process_one,
+                    entry,
+                    options,
+                    size,
+                    digest,
+                    key=f"video-{_key(entry)}",
+                    pure=False,
+                )
+                for entry, size, digest in todo
+            ]
+            try:
+                for future in as_completed(futures):
+                    row: ManifestRow = future.result()
+                    manifest[row.path] = row
+                    finished.add(row.path)
+                    write_manifest(table, manifest.values())
+                    if row.status == "done":
+                        done += 1
+                        frames += row.frames
+                        video_seconds += row.video_seconds
+                    else:
+                        failed += 1
+                        progress.note(f"failed {row.path}: {row.error}")
+                    progress.finished(row)
+            except KeyboardInterrupt:
+                interrupted = True
+                client.cancel(futures)
+    except KeyboardInterrupt:  # a second Ctrl-C while the cluster shuts down
+        interrupted = True
     finally:
-        for future in futures:
-            future.cancel()
-        write_manifest(table, manifest.values()) if manifest else None
+        progress.close()
+        if manifest:
+            write_manifest(table, manifest.values())
+    if interrupted:
+        for entry, _, _ in todo:  # the cluster is closed: nothing writes these any more
+            if str(entry.path) not in finished:
+                remove_temporaries(entry, options.out)
+        raise Interrupted(
+            f"{done + failed} of {len(todo)} videos finished and are kept in {options.out}; "
+            "run the same command again to resume"
+        )
     return BatchSummary(done, failed, skipped, video_seconds, frames, time.perf_counter() - started)
+
+
+class BatchProgress:
+    """One bar over all inputs: videos done, frames per second of the whole cluster, and time
+    left (from the bytes still to process, since videos differ in length)."""
+
+    def __init__(self, sizes: list[int], stream: TextIO | None = None) -> None:
+        self.bar = Progress(len(sizes), label="videos", stream=stream)
+        self.bytes_total = max(sum(sizes), 1)
+        self.bytes_done = 0
+        self.frames = 0
+
+    def finished(self, row: ManifestRow) -> None:
+        """Count one finished input."""
+        self.bytes_done += row.size
+        self.frames += row.frames
+        elapsed = time.perf_counter() - self.bar.started
+        rate = self.frames / elapsed if elapsed > 0 else 0.0
+        left = elapsed * (self.bytes_total - self.bytes_done) / max(self.bytes_done, 1)
+        self.bar.update(detail=f"{rate:.1f} frames/s, {left:.0f} s left")
+
+    def note(self, message: str) -> None:
+        """A message on a line of its own, above the bar."""
+        if self.bar.enabled:
+            self.bar.stream.write("\r\033[K")
+        self.bar.stream.write(message + "\n")
+        self.bar.stream.flush()
+
+    def close(self) -> None:
+        """End the bar's line."""
+        self.bar.close()
 
 
 def iter_rows(summary: BatchSummary) -> Iterator[str]:

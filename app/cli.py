@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from app.errors import InputError
+from app.errors import InputError, Interrupted
 from app.runtime import tune_process
 from camera_cal import (
     Calibration,
@@ -182,10 +182,7 @@ def batch_command(
     ] = None,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
-    import os
-
     from app.batch import BatchOptions, find_inputs, iter_rows, run_batch
-    from app.progress import Progress
 
     entries = find_inputs(inputs)
     if not entries:
@@ -197,38 +194,9 @@ def batch_command(
         calibration=None if calibration.lower() == "none" else str(Path(calibration).resolve()),
         model=str(model.resolve()) if model is not None else None,
     )
-    from distributed import Client, LocalCluster
-
-    if scheduler is not None:
-        try:
-            client = Client(scheduler, timeout="10s")
-        except OSError as error:
-            raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({error})") from None
-        cluster = None
-    else:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0"
-        )
-        client = Client(cluster)
-    typer.echo(f"dashboard: {client.dashboard_link}", err=True)
-    bar = Progress(len(entries), label="videos", unit="videos/s")
-    frames = 0
-
-    def on_row(row: object) -> None:
-        nonlocal frames
-        frames += getattr(row, "frames", 0)
-        bar.update()
-        if getattr(row, "status", "") == "failed":
-            typer.echo(f"\nfailed {row.path}: {row.error}", err=True)  # type: ignore[attr-defined]
-
-    try:
-        summary = run_batch(entries, options, client, force=force, on_row=on_row)
-    finally:
-        bar.close()
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    summary = run_batch(
+        entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
+    )
     for line in iter_rows(summary):
         typer.echo(line)
     if summary.failed:
@@ -388,6 +356,9 @@ def main() -> None:
             traceback.print_exc()
         typer.echo(f"roadview: error: {error}", err=True)
         sys.exit(2)
+    except Interrupted as interrupted:
+        typer.echo(f"roadview: interrupted; {interrupted}", err=True)
+        sys.exit(130)
     except KeyboardInterrupt:
         typer.echo("roadview: interrupted; no output was written", err=True)
         sys.exit(130)

@@ -3,3 +3,7 @@
 
 class InputError(Exception):
     """Bad input or environment; the message names the problem and a fix."""
+
+
+class Interrupted(Exception):  # noqa: N818 (not an error: a user's choice)
+    """Ctrl-C after some work was kept; the message says what was kept and how to go on."""

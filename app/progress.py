@@ -29,8 +29,8 @@ class Progress:
         elapsed = time.perf_counter() - self.started
         return self.count / elapsed if elapsed > 0 else 0.0
 
-    def update(self, n: int = 1) -> None:
-        """Count n more frames done."""
+    def update(self, n: int = 1, detail: str | None = None) -> None:
+        """Count n more items done; `detail` replaces the rate at the end of the line."""
         self.count += n
         now = time.perf_counter()
         if self.enabled and (now - self._last_draw > 0.1 or self.count >= self.total):
@@ -38,9 +38,8 @@ class Progress:
             width = 30
             filled = int(width * min(self.count / self.total, 1.0))
             bar = "#" * filled + "." * (width - filled)
-            self.stream.write(
-                f"\r{self.label} [{bar}] {self.count}/{self.total} {self.fps:5.1f} {self.unit}"
-            )
+            rate = detail if detail is not None else f"{self.fps:5.1f} {self.unit}"
+            self.stream.write(f"\r{self.label} [{bar}] {self.count}/{self.total} {rate}\033[K")
             self.stream.flush()
 
     def close(self) -> None:

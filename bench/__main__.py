@@ -134,6 +134,64 @@ def joined_clip(data: Path, path: Path, frames: int) -> Path:
     return path
 
 
+def _timed(command: list[str]) -> float:
+    """Wall seconds of one command, which must succeed."""
+    t0 = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed: {done.stderr.strip()[-300:]}")
+    return time.perf_counter() - t0
+
+
+def batch_scaling(data: Path, copies: int = 3) -> dict[str, Any]:
+    """Frames per second of `roadview batch` over copies of the shared clips with 1 and 2 local
+    workers, of the same files through `roadview process` one after another, the cluster's own
+    start-up (a run whose inputs are all done) and the overhead of one task (a one-frame video)."""
+    import pyarrow.parquet as pq
+
+    roadview = [sys.executable, "-m", "app"]
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "in"
+        folder.mkdir()
+        frames = 0
+        for k in range(copies):
+            for clip in _clip_paths(data):
+                (folder / f"{clip.stem}_{k}.mp4").write_bytes(clip.read_bytes())
+                frames += probe_video(clip).n_frames
+        files = sorted(folder.iterdir())
+        report: dict[str, Any] = {"videos": len(files), "frames": frames}
+        for workers in (1, 2):
+            for video in ("--video", "--no-video"):
+                out = f"{tmp}/out{workers}{video}"
+                command = [*roadview, "batch", str(folder), "--out", out, "--workers", str(workers)]
+                name = "batch" if video == "--video" else "batch_records"
+                report[f"{name}_{workers}_workers_fps"] = frames / _timed([*command, video])
+        report["cluster_startup_s"] = _timed(
+            [*roadview, "batch", str(folder), "--out", f"{tmp}/out2--video", "--workers", "2"]
+        )
+        sequential = sum(
+            _timed(
+                [*roadview, "process", str(f), "-o", f"{tmp}/seq.mp4", "--json", f"{tmp}/seq.jsonl"]
+            )
+            for f in files
+        )
+        report["sequential_process_fps"] = frames / sequential
+        tiny = Path(tmp) / "tiny"
+        tiny.mkdir()
+        for k in range(8):
+            writer = VideoWriter(tiny / f"one_{k}.mp4", (1280, 720), 25.0)
+            writer.write(next(read_frames(files[0], probe_video(files[0]))))
+            writer.close()
+        _timed([*roadview, "batch", str(tiny), "--out", f"{tmp}/tiny_out", "--workers", "1"])
+        rows = pq.read_table(f"{tmp}/tiny_out/table/manifest.parquet").to_pylist()
+        report["task_overhead_s"] = float(np.median([r["processing_seconds"] for r in rows]))
+    report["speedup_2_vs_1"] = report["batch_2_workers_fps"] / report["batch_1_workers_fps"]
+    report["records_speedup_2_vs_1"] = (
+        report["batch_records_2_workers_fps"] / report["batch_records_1_workers_fps"]
+    )
+    return report
+
+
 def naive_detector_ms(clip: Path, frames: int = 2) -> dict[str, float]:
     """Per-window reference: every window cut, resized, featurised and classified one by one."""
     model = load_model()
@@ -194,9 +252,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--data", type=Path, default=ROOT / "data")
     parser.add_argument("--no-train", action="store_true", help="skip timing training (~1 min)")
+    parser.add_argument("--only-batch", action="store_true", help="only the batch scaling figures")
     args = parser.parse_args()
     tune_process()  # as `roadview` does, so stage figures match the product
     report: dict[str, Any] = {"clips": {}}
+    if args.only_batch:
+        print(json.dumps(batch_scaling(args.data), indent=2))
+        return
     for clip in _clip_paths(args.data):
         stages = stage_times(clip)
         e2e = end_to_end(clip)
@@ -232,6 +294,19 @@ def main() -> None:
         + f" fps; decode+encode floor {floor_short:.1f} fps; start-up (a one-frame run) "
         + ", ".join(f"{s:.2f}" for s in startup)
         + " s"
+    )
+    scaling = batch_scaling(args.data)
+    report["batch"] = scaling
+    print(
+        f"batch of {scaling['videos']} videos ({scaling['frames']} frames, with video output): "
+        f"1 worker {scaling['batch_1_workers_fps']:.1f} fps, 2 workers "
+        f"{scaling['batch_2_workers_fps']:.1f} fps ({scaling['speedup_2_vs_1']:.2f}x); records "
+        f"only (--no-video) 1 worker {scaling['batch_records_1_workers_fps']:.1f} fps, 2 workers "
+        f"{scaling['batch_records_2_workers_fps']:.1f} fps "
+        f"({scaling['records_speedup_2_vs_1']:.2f}x); "
+        f"'roadview process' one after another {scaling['sequential_process_fps']:.1f} fps; "
+        f"local cluster start and stop {scaling['cluster_startup_s']:.1f} s; "
+        f"per-task overhead (a one-frame video) {scaling['task_overhead_s']:.2f} s"
     )
     naive = naive_detector_ms(_clip_paths(args.data)[0])
     report["naive_detector"] = naive

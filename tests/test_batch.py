@@ -181,3 +181,35 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
             except subprocess.TimeoutExpired:
                 proc.kill()
         logs.close()
+
+
+def test_ctrl_c_keeps_what_finished_and_the_next_run_resumes(inputs: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    command = [
+        sys.executable,
+        "-m",
+        "app",
+        "batch",
+        str(inputs),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--no-video",
+    ]
+    batch = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    manifest = out / "table" / "manifest.parquet"
+    deadline = time.time() + 120
+    while time.time() < deadline and not manifest.exists():
+        time.sleep(0.05)
+    assert manifest.exists(), "no input finished in time"
+    batch.send_signal(signal.SIGINT)
+    stdout, stderr = batch.communicate(timeout=120)
+    assert batch.returncode == 130, stdout + stderr
+    assert "interrupted" in stderr and "run the same command again to resume" in stderr
+    kept = {n for n, r in _manifest(out).items() if r["status"] in ("done", "failed")}
+    assert 1 <= len(kept) < 4
+    assert not list(out.rglob("*.tmp*"))
+    again = run_cli("batch", inputs, "--out", out, "--workers", "1", "--no-video")
+    done_before = sum(1 for n in kept if n != "broken.mp4")
+    assert f"{3 - done_before} done, 1 failed, {done_before} skipped" in again.stdout, again.stdout

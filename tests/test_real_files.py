@@ -36,8 +36,21 @@ def made(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str
     ffmpeg(
         "-i", clip, "-vf", "scale=1279:719", "-t", "0.4", "-pix_fmt", "yuv444p", files["odd.mp4"]
     )
-    ffmpeg("-i", clip, "-t", "0.4", "-c:v", "libvpx-vp9", "-deadline", "realtime", "-cpu-used",
-           "8", "-c:a", "libopus", files["clip.webm"])  # fmt: skip
+    ffmpeg(
+        "-i",
+        clip,
+        "-t",
+        "0.4",
+        "-c:v",
+        "libvpx-vp9",
+        "-deadline",
+        "realtime",
+        "-cpu-used",
+        "8",
+        "-c:a",
+        "libopus",
+        files["clip.webm"],
+    )
     ffmpeg("-i", clip, "-t", "0.4", "-c:v", "libx264", "-c:a", "aac", files["clip.ts"])
     audio = {
         "short": ("sine=d=0.5", []),
@@ -47,8 +60,24 @@ def made(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str
     }
     for name, (source, extra) in audio.items():
         files[name] = d / f"audio_{name}.mp4"
-        ffmpeg("-i", clip, "-f", "lavfi", "-i", source, "-map", "0:v", "-map", "1:a", "-c:v",
-               "copy", "-c:a", "aac", *extra, files[name])  # fmt: skip
+        ffmpeg(
+            "-i",
+            clip,
+            "-f",
+            "lavfi",
+            "-i",
+            source,
+            "-map",
+            "0:v",
+            "-map",
+            "1:a",
+            "-c:v",
+            "copy",
+            "-c:a",
+            "aac",
+            *extra,
+            files[name],
+        )
     files["silent"] = d / "silent.mp4"
     ffmpeg("-i", clip, "-an", "-c:v", "copy", files["silent"])
     return files
@@ -64,9 +93,17 @@ def test_rotated_video_is_processed_upright(made: dict[str, Path], tmp_path: Pat
     assert min(turned) < 2.0, turned
     out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
     result = run_cli(
-        "process", made["rotated.mp4"], "-o", out, "--json", record, "--calibration", "none",
-        "--no-lanes", "--no-vehicles",
-    )  # fmt: skip
+        "process",
+        made["rotated.mp4"],
+        "-o",
+        out,
+        "--json",
+        record,
+        "--calibration",
+        "none",
+        "--no-lanes",
+        "--no-vehicles",
+    )
     assert result.returncode == 0, result.stderr
     out_info, frames = count_frames(out)
     assert out_info.size == (720, 1280) and frames == 38
@@ -229,11 +266,26 @@ def test_records_follow_the_shipped_schema(
     validator = jsonschema.Draft202012Validator(SCHEMA)
     runs: dict[str, list[str | Path]] = {
         "both": ["process", test_video, "-o", tmp_path / "a.mp4", "--json", tmp_path / "a.jsonl"],
-        "lanes": ["process", test_video, "-o", tmp_path / "b.mp4", "--json", tmp_path / "b.jsonl",
-                  "--no-vehicles", "--end", "0.4"],
-        "still": ["process", data_dir / "test_images" / "test1.jpg", "-o", tmp_path / "c.png",
-                  "--json", tmp_path / "c.jsonl"],
-    }  # fmt: skip
+        "lanes": [
+            "process",
+            test_video,
+            "-o",
+            tmp_path / "b.mp4",
+            "--json",
+            tmp_path / "b.jsonl",
+            "--no-vehicles",
+            "--end",
+            "0.4",
+        ],
+        "still": [
+            "process",
+            data_dir / "test_images" / "test1.jpg",
+            "-o",
+            tmp_path / "c.png",
+            "--json",
+            tmp_path / "c.jsonl",
+        ],
+    }
     for name, args in runs.items():
         result = run_cli(*args)
         assert result.returncode == 0, result.stderr
