@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+import pyarrow.compute as pc
+import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
@@ -76,6 +78,12 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
         len(r["vehicles"]) for r in lines
     )
     assert not list(out.rglob("*.tmp*"))
+    # The README's queries work on the table.
+    table = ds.dataset(out / "table" / "frames").to_table()
+    ranked = table.group_by("video").aggregate([("vehicles", "mean")])
+    ranked = ranked.sort_by([("vehicles_mean", "descending")]).to_pylist()
+    assert {r["video"] for r in ranked} == {f["video"] for f in frames}
+    assert 0.0 <= 1 - pc.mean(table["lane_found"].cast("int8")).as_py() <= 1.0
     again = run_cli("batch", inputs, "--out", out, "--workers", "2", "--no-video")
     assert "0 done, 1 failed, 3 skipped" in again.stdout, again.stdout
 
