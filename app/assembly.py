@@ -38,9 +38,7 @@ def build_stages(
 
         classifier = classifier if classifier is not None else load_model(model)
         config = DetectorConfig().for_still() if still else DetectorConfig()
-        stages.append(
-            VehicleDetector(classifier, config, keep_debug=keep_debug, interleave=not still)
-        )
+        stages.append(VehicleDetector(classifier, config, keep_debug=keep_debug))
     return stages
 
 

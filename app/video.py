@@ -62,7 +62,7 @@ CONTAINERS: dict[str, Container] = {
 
 @functools.cache
 def ffmpeg_binary() -> str:
-    """Path of the ffmpeg executable shipped by imageio-ffmpeg (a dependency of moviepy)."""
+    """Path of the ffmpeg executable that the imageio-ffmpeg package ships."""
     from imageio_ffmpeg import get_ffmpeg_exe
 
     return str(get_ffmpeg_exe())

@@ -22,6 +22,7 @@ from app.pipeline import Pipeline
 from app.runtime import tune_process
 from app.video import VideoWriter, probe_video, read_frames
 from camera_cal import default_calibration_path, load_calibration
+from vehicles.config import DetectorConfig
 from vehicles.detector import VehicleDetector
 from vehicles.features import patch_features
 from vehicles.model import load_model
@@ -195,7 +196,7 @@ def batch_scaling(data: Path, copies: int = 3) -> dict[str, Any]:
 def naive_detector_ms(clip: Path, frames: int = 2) -> dict[str, float]:
     """Per-window reference: every window cut, resized, featurised and classified one by one."""
     model = load_model()
-    detector = VehicleDetector(model, interleave=False)
+    detector = VehicleDetector(model, DetectorConfig(interleave=False))
     info = probe_video(clip)
     cfg = model.config
     naive, dense = [], []

@@ -51,6 +51,43 @@ def test_feature_length_and_determinism(patches: PatchSet, config: FeatureConfig
     assert np.all((np.abs(norms - 1) < 1e-3) | (norms < 1e-3))
 
 
+def test_hog_agrees_with_scikit_images_reference(patches: PatchSet) -> None:
+    """Our HOG (gradients within each cell, votes split between two bins) describes a patch as
+    `skimage.feature.hog` does: block by block, channel by channel, the two correlate."""
+    from skimage.feature import hog
+
+    config = FeatureConfig()
+    k, bins, cells = config.cells_per_block, config.orientations, config.patch_size // 8 - 1
+
+    def both(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ycc = cv2.cvtColor(image, cv2.COLOR_RGB2YCrCb).astype(np.float32)
+        ours = patch_features(image, config)[: config.lengths[0]]
+        ours = ours.reshape(cells, cells, 3, k, k, bins).transpose(2, 0, 1, 3, 4, 5)
+        ref = np.stack(
+            [
+                hog(
+                    ycc[:, :, c],
+                    orientations=bins,
+                    pixels_per_cell=(8, 8),
+                    cells_per_block=(k, k),
+                    block_norm="L2-Hys",
+                    feature_vector=False,
+                )
+                for c in range(3)
+            ]
+        )
+        return ours.reshape(3, -1), ref.reshape(3, -1)
+
+    sample = patches.images[:: len(patches.images) // 40][:40]
+    pairs = [both(image) for image in sample]
+    same = [np.corrcoef(o[c], r[c])[0, 1] for o, r in pairs for c in range(3)]
+    other = [
+        np.corrcoef(pairs[i][0][c], pairs[i - 1][1][c])[0, 1] for i in range(40) for c in range(3)
+    ]
+    assert np.mean(same) > 0.8 and np.min(same) > 0.55
+    assert np.mean(other) < np.mean(same) - 0.3  # another patch's reference HOG does not match
+
+
 def test_other_patch_sizes_are_resized(patches: PatchSet) -> None:
     big = cv2.resize(patches.images[5], (128, 128), interpolation=cv2.INTER_CUBIC)
     assert patch_features(big, FeatureConfig()).shape == (FeatureConfig().length,)

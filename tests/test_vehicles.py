@@ -14,7 +14,7 @@ from app.evaluate import FrameLabels, evaluate, iou, load_labels
 from app.video import probe_video, read_frames
 from camera_cal import build_undistorter, default_calibration_path, load_calibration
 from tests.helpers import process_clip
-from vehicles.config import Band, DetectorConfig
+from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
 from vehicles.detections import Detections
 from vehicles.detector import VehicleDetector
 from vehicles.features import patch_features
@@ -22,6 +22,16 @@ from vehicles.heatmap import Heatmap
 from vehicles.model import VehicleModel, default_model_path, load_model
 from vehicles.search import LinearWeights, search_band
 from vehicles.tracker import Tracker
+
+
+def plain_heat(**settings: Any) -> HeatConfig:
+    """Heat settings with every side rule off unless asked for."""
+    return HeatConfig(**{"edge_peak_fraction": None, **settings})
+
+
+def plain_tracking(**settings: Any) -> TrackConfig:
+    """Tracking without velocity or frame-side rules unless asked for."""
+    return TrackConfig(**{"velocity_gain": 0.0, "min_inside": 0.0, **settings})
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +75,7 @@ def test_pasted_vehicle_is_found(
     road = _rgb(data_dir / "test_images" / "straight_lines1.jpg").copy()
     patch = cv2.resize(_vehicle_patch(data_dir), (size, size), interpolation=cv2.INTER_CUBIC)
     road[y : y + size, x : x + size] = patch
-    detector = VehicleDetector(model, DetectorConfig().for_still(), interleave=False)
+    detector = VehicleDetector(model, DetectorConfig().for_still())
     found = detector.process(road).detections
     truth = (x, y, x + size, y + size)
     assert len(found) >= 1
@@ -86,65 +96,69 @@ def test_vehicle_cut_by_the_frame_edge_is_found(
     else:
         road[y : y + size, :visible] = patch[:, -visible:]
         truth = (0, y, visible, y + size)
-    detector = VehicleDetector(model, DetectorConfig().for_still(), interleave=False)
+    detector = VehicleDetector(model, DetectorConfig().for_still())
     found = detector.process(road).detections
     assert len(found) >= 1
     assert max(iou(box, truth) for box in found.boxes) >= 0.5
 
 
 def test_heatmap_suppresses_a_one_frame_false_alarm() -> None:
-    heatmap = Heatmap(history=8, threshold=2.5, scale=4)
+    heatmap = Heatmap(plain_heat(history=8))
     steady = np.array([[400.0, 400, 496, 496]] * 4)  # four overlapping windows every frame
     alarm = np.array([[100.0, 420, 164, 484]] * 4)
     for frame in range(8):
         boxes = np.vstack([steady, alarm]) if frame == 5 else steady
         heatmap.add((1280, 720), boxes, np.ones(len(boxes)))
-        found, _ = heatmap.regions(0.35, 0.6)
+        found, _ = heatmap.regions()
         assert not any(b[2] < 300 for b in found)  # the single-frame alarm never shows
     assert len(found) == 1 and iou(found[0], steady[0]) > 0.8
 
 
 def test_heatmap_places_a_moving_vehicle_where_it_is_now() -> None:
-    heatmap = Heatmap(history=8, threshold=2.5, scale=4, recent=1, recent_threshold=1.0)
+    heatmap = Heatmap(plain_heat(history=8, recent=1))
     for frame in range(8):  # a strongly detected car crossing the image at 20 px per frame
         x = 600 - 20 * frame
         windows = np.array(
             [[x - 8.0, 420, x + 56, 468], [x, 420, x + 64, 468], [x + 8, 420, x + 72, 468]]
         )
         heatmap.add((1280, 720), windows, np.full(3, 8.0))
-    found, _ = heatmap.regions(0.35, 0.6)
+    found, _ = heatmap.regions()
     assert len(found) == 1
     assert iou(found[0], [460, 420, 524, 468]) > 0.8  # its last place, not its trail
 
 
+def _regions_of(windows: np.ndarray, **settings: Any) -> np.ndarray:
+    """Region boxes of one frame of equally weighted windows under the given heat settings."""
+    heatmap = Heatmap(plain_heat(history=1, **settings))
+    heatmap.add((1280, 720), windows, np.ones(len(windows)) * 3)
+    return heatmap.regions()[0]
+
+
 def test_heatmap_splits_two_touching_vehicles() -> None:
-    heatmap = Heatmap(history=1, threshold=2.5, scale=4)
     windows = []
     for cx in (400, 528):  # two cars side by side: their heat touches above the threshold
         for dx in (-16, 0, 16):
             windows.append([cx - 48 + dx, 400, cx + 48 + dx, 480])
-    heatmap.add((1280, 720), np.array(windows, float), np.ones(len(windows)) * 3)
-    assert len(heatmap.regions(0.35, 0.0)[0]) == 1  # never splitting: one merged box
-    found, _ = heatmap.regions(0.35, 0.6)
+    boxes = np.array(windows, float)
+    assert len(_regions_of(boxes, split_valley=0.0)) == 1  # never splitting: one merged box
+    found = _regions_of(boxes)
     assert len(found) == 2
     assert max(iou(found[0], [352, 400, 448, 480]), iou(found[1], [352, 400, 448, 480])) > 0.6
 
 
 def test_heatmap_box_of_a_vehicle_at_the_frame_side_covers_its_inner_part() -> None:
-    heatmap = Heatmap(history=1, threshold=2.5, scale=4)
     # A car at x 1168-1280: windows past the side (seeing it and its mirror image) pile heat on
     # its outer part; one inside the frame covers all of it.
     windows = np.array([[1216.0, 420, 1344, 540]] * 4 + [[1168.0, 420, 1296, 540]])
-    heatmap.add((1280, 720), windows, np.ones(len(windows)) * 3)
-    narrow, _ = heatmap.regions(0.35, 0.6)
-    found, _ = heatmap.regions(0.35, 0.6, edge_fraction=0.15)
+    narrow = _regions_of(windows)
+    found = _regions_of(windows, edge_peak_fraction=0.15)
     assert len(narrow) == len(found) == 1
     assert narrow[0][0] >= 1200  # the usual cut-off keeps only the piled-up part
     assert iou(found[0], [1168, 420, 1280, 540]) > 0.9
 
 
 def test_track_ids_stay_constant_on_a_moving_box() -> None:
-    tracker = Tracker(match_iou=0.2, smoothing=0.5, confirm_frames=3, max_missed=5, show_missed=2)
+    tracker = Tracker(plain_tracking(confirm_frames=3, max_missed=5, show_missed=2))
     ids = []
     for frame in range(30):
         x = 300 + 6 * frame
@@ -161,7 +175,7 @@ def test_track_ids_stay_constant_on_a_moving_box() -> None:
 
 
 def test_track_ids_count_shown_vehicles_only() -> None:
-    tracker = Tracker(match_iou=0.2, smoothing=0.5, confirm_frames=3, max_missed=2, show_missed=1)
+    tracker = Tracker(plain_tracking(confirm_frames=3, max_missed=2, show_missed=1))
     car = np.array([[400.0, 400, 500, 470]])
     blips = [np.array([[100.0 + 150 * k, 420, 160 + 150 * k, 460]]) for k in range(3)]
     shown = tracker.update(Detections.from_boxes(car, np.ones(1)))
@@ -178,7 +192,7 @@ def test_track_ids_count_shown_vehicles_only() -> None:
 def test_track_moves_a_lagging_measurement_to_where_the_car_is_now() -> None:
     # Heat averaged over two frames boxes a car crossing at 20 px per frame 10 px behind it.
     def last_x1(lag: float) -> float:
-        tracker = Tracker(0.2, 0.5, 3, 8, 4, velocity_gain=0.3, lag=lag)
+        tracker = Tracker(plain_tracking(confirm_frames=3, velocity_gain=0.3), lag=lag)
         for frame in range(25):
             x = 900.0 - 20 * frame + 10
             box = np.array([[x, 420, x + 70, 460]])
@@ -191,15 +205,7 @@ def test_track_moves_a_lagging_measurement_to_where_the_car_is_now() -> None:
 
 
 def test_track_follows_a_fast_car_and_drops_it_when_it_leaves() -> None:
-    tracker = Tracker(
-        match_iou=0.2,
-        smoothing=0.5,
-        confirm_frames=3,
-        max_missed=8,
-        show_missed=4,
-        velocity_gain=0.3,
-        min_inside=0.3,
-    )
+    tracker = Tracker(plain_tracking(confirm_frames=3, velocity_gain=0.3, min_inside=0.3))
     boxes = []
     for frame in range(40):  # oncoming: 25 px per frame to the left, 70 px wide
         x = 900 - 25 * frame

@@ -32,26 +32,25 @@ def _default_bands() -> tuple[Band, ...]:
 
 
 @dataclass(frozen=True)
-class DetectorConfig:
-    """Search bands, heat, and tracking settings (defaults for 25 fps)."""
+class HeatConfig:
+    """How the `Heatmap` accumulates window hits and turns them into regions."""
 
-    bands: tuple[Band, ...] = field(default_factory=_default_bands)
-    min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
-    # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
-    # training crops are wider than the car is tall, with road showing below it.
-    heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)
-    heat_scale: int = 4  # the heat map is kept at 1/heat_scale of the frame size
-    heat_history: int = 8  # frames combined by the Heatmap
-    heat_threshold: float = 2.5  # mean heat per frame over the history a pixel must exceed
-    recent_frames: int = 2  # newest frames that place each vehicle (both interleaved band sets)
+    history: int = 8  # frames combined
+    threshold: float = 2.5  # mean heat per frame over the history a pixel must exceed
+    scale: int = 4  # the heat map is kept at 1/scale of the frame size
+    recent: int = 2  # newest frames that place each vehicle (both interleaved band sets)
     recent_threshold: float = 1.0  # mean heat per frame over those a vehicle's pixels must exceed
     peak_fraction: float = 0.35  # a region's box keeps heat above this fraction of its peak
     # A region at the frame's left or right side: its width is taken at this fraction of its peak
-    # (mirrored windows past the side pile heat up there).
-    edge_peak_fraction: float = 0.2
+    # (mirrored windows past the side pile heat up there); None: as any other region.
+    edge_peak_fraction: float | None = 0.2
     split_valley: float = 0.6  # two peaks split a region when the valley is below this x peak
-    min_box: float = 0.03  # smallest box side reported / frame height
-    # Tracking.
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    """How the `Tracker` matches, smooths, shows and drops tracks."""
+
     match_iou: float = 0.2
     smoothing: float = 0.5  # weight of the measured box against the predicted one
     velocity_gain: float = 0.3  # how much of the prediction error corrects a track's velocity
@@ -60,6 +59,27 @@ class DetectorConfig:
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames
 
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Search bands, heat and tracking settings (defaults for 25 fps video)."""
+
+    bands: tuple[Band, ...] = field(default_factory=_default_bands)
+    min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
+    # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
+    # training crops are wider than the car is tall, with road showing below it.
+    heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)
+    min_box: float = 0.03  # smallest box side reported / frame height
+    # Video frames alternate between two halves of the bands (the heat history spans both).
+    interleave: bool = True
+    heat: HeatConfig = field(default_factory=HeatConfig)
+    track: TrackConfig = field(default_factory=TrackConfig)
+
     def for_still(self) -> DetectorConfig:
-        """The same search for a single image: no history to wait for or average over."""
-        return replace(self, heat_history=1, confirm_frames=1)
+        """The same search for a single image: every band, no history to wait for or average."""
+        return replace(
+            self,
+            interleave=False,
+            heat=replace(self.heat, history=1),
+            track=replace(self.track, confirm_frames=1),
+        )

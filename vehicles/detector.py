@@ -61,32 +61,14 @@ class VehicleDetector:
         model: VehicleModel,
         config: DetectorConfig | None = None,
         keep_debug: bool = False,
-        interleave: bool = True,
     ) -> None:
         self.model = model
         self.config = config if config is not None else DetectorConfig()
         self.weights = LinearWeights.from_model(model)
         self.keep_debug = keep_debug
-        self.interleave = interleave
-        cfg = self.config
-        self.heatmap = Heatmap(
-            cfg.heat_history,
-            cfg.heat_threshold,
-            cfg.heat_scale,
-            cfg.recent_frames,
-            cfg.recent_threshold,
-        )
-        self.tracker = Tracker(
-            cfg.match_iou,
-            cfg.smoothing,
-            cfg.confirm_frames,
-            cfg.max_missed,
-            cfg.show_missed,
-            cfg.velocity_gain,
-            cfg.min_inside,
-            # Region boxes come from heat averaged over the recent frames: centred that far back.
-            lag=(cfg.recent_frames - 1) / 2,
-        )
+        self.heatmap = Heatmap(self.config.heat)
+        # Region boxes come from heat averaged over the recent frames: centred that far back.
+        self.tracker = Tracker(self.config.track, lag=(self.config.heat.recent - 1) / 2)
         self.frame_index = 0
 
     def reset(self) -> None:
@@ -106,7 +88,7 @@ class VehicleDetector:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame."""
         cfg = self.config
         h, w = frame.shape[:2]
-        parity = self.frame_index % 2 if self.interleave else None
+        parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         hits = self.search(frame, parity)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
@@ -119,21 +101,19 @@ class VehicleDetector:
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
         frame_heat = self.heatmap.add((w, h), footprint(boxes[strong], cfg.heat_footprint), weight)
-        region_boxes, peaks = self.heatmap.regions(
-            cfg.peak_fraction, cfg.split_valley, cfg.edge_peak_fraction
-        )
+        region_boxes, peaks = self.heatmap.regions()
         big = (
             np.minimum(
                 region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
             )
             >= cfg.min_box * h
         )
-        scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat_threshold, 1e-6))
+        scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the frame's side (a car leaving); what is shown stays inside it.
         shown = self.tracker.update(regions, (w, h)).clipped((w, h))
         debug = (
-            VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat_threshold)
+            VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold)
             if self.keep_debug
             else None
         )

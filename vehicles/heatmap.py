@@ -8,6 +8,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from vehicles.config import HeatConfig
+
 
 def label_regions(mask: NDArray[np.bool_]) -> tuple[NDArray[np.int32], list[tuple[slice, slice]]]:
     """4-connected regions of a mask: labels 1..n in raster order of their first pixel, and each
@@ -104,19 +106,10 @@ class Heatmap:
     box at its position, not along its trail.
     """
 
-    def __init__(
-        self,
-        history: int,
-        threshold: float,
-        scale: int,
-        recent: int = 2,
-        recent_threshold: float = 1.0,
-    ) -> None:
-        self.frames: deque[NDArray[np.float32]] = deque(maxlen=history)
-        self.threshold = threshold
-        self.scale = scale
-        self.recent = max(1, min(recent, history))
-        self.recent_threshold = recent_threshold
+    def __init__(self, config: HeatConfig) -> None:
+        self.config = config
+        self.frames: deque[NDArray[np.float32]] = deque(maxlen=config.history)
+        self.recent = max(1, min(config.recent, config.history))
 
     def reset(self) -> None:
         """Forget all frames."""
@@ -127,10 +120,11 @@ class Heatmap:
     ) -> NDArray[np.float32]:
         """Add one frame's weighted boxes; returns this frame's heat."""
         w, h = frame_size
-        shape = (-(-h // self.scale), -(-w // self.scale))
+        scale = self.config.scale
+        shape = (-(-h // scale), -(-w // scale))
         if self.frames and self.frames[-1].shape != shape:
             self.frames.clear()
-        heat = box_heat(shape, boxes, weights, self.scale)
+        heat = box_heat(shape, boxes, weights, scale)
         self.frames.append(heat)
         return heat
 
@@ -151,9 +145,7 @@ class Heatmap:
         """Mean heat per frame over the recent frames."""
         return self._mean(self.recent)
 
-    def regions(
-        self, peak_fraction: float, valley: float, edge_fraction: float | None = None
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def regions(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Boxes (frame pixels) and peak heat of the vehicles seen now where heat persists.
 
         Recent heat is labelled, split at clear valleys between peaks, and each part is kept when it
@@ -163,9 +155,10 @@ class Heatmap:
         reaching past the side see the vehicle and its mirror image, so heat piles up at the side
         and the vehicle's inner part falls below the usual fraction.
         """
-        persistent = self.combined > self.threshold
+        cfg = self.config
+        persistent = self.combined > cfg.threshold
         heat = self.current
-        labels, windows = label_regions(heat > self.recent_threshold)
+        labels, windows = label_regions(heat > cfg.recent_threshold)
         boxes, peaks = [], []
         for index, window in enumerate(windows, start=1):
             # Work inside the region's bounding box (a few hundred pixels, not the whole map).
@@ -173,20 +166,21 @@ class Heatmap:
             region = labels[window] == index
             if not local_persistent[region].any():
                 continue
-            for part in split_peaks(local_heat, region, valley):
+            for part in split_peaks(local_heat, region, cfg.split_valley):
                 if not local_persistent[part].any():
                     continue
                 peak = float(local_heat[part].max())
-                core = part & (local_heat >= max(self.recent_threshold, peak_fraction * peak))
+                core = part & (local_heat >= max(cfg.recent_threshold, cfg.peak_fraction * peak))
                 ys, xs = np.nonzero(core)
                 at_side = (window[1].start == 0 and bool(part[:, 0].any())) or (
                     window[1].stop == heat.shape[1] and bool(part[:, -1].any())
                 )
-                if edge_fraction is not None and at_side:
-                    wide = part & (local_heat >= max(self.recent_threshold, edge_fraction * peak))
+                if cfg.edge_peak_fraction is not None and at_side:
+                    edge = max(cfg.recent_threshold, cfg.edge_peak_fraction * peak)
+                    wide = part & (local_heat >= edge)
                     xs = np.nonzero(wide)[1]
                 y0, x0 = window[0].start, window[1].start
                 boxes.append([x0 + xs.min(), y0 + ys.min(), x0 + xs.max() + 1, y0 + ys.max() + 1])
                 peaks.append(peak)
-        out = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) * self.scale
+        out = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) * cfg.scale
         return out, np.asarray(peaks, dtype=np.float64)

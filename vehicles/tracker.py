@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vehicles.assignment import linear_sum_assignment
+from vehicles.config import TrackConfig
 from vehicles.detections import Detections, inside_share, iou_matrix
 
 
@@ -36,24 +37,8 @@ class Track:
 class Tracker:
     """Associates each frame's boxes with predicted tracks by IoU (optimal assignment)."""
 
-    def __init__(
-        self,
-        match_iou: float,
-        smoothing: float,
-        confirm_frames: int,
-        max_missed: int,
-        show_missed: int,
-        velocity_gain: float = 0.0,
-        min_inside: float = 0.0,
-        lag: float = 0.0,
-    ) -> None:
-        self.match_iou = match_iou
-        self.smoothing = smoothing
-        self.velocity_gain = velocity_gain
-        self.confirm_frames = confirm_frames
-        self.max_missed = max_missed
-        self.show_missed = show_missed
-        self.min_inside = min_inside
+    def __init__(self, config: TrackConfig, lag: float = 0.0) -> None:
+        self.config = config
         self.lag = lag
         self.tracks: list[Track] = []
         self._next_id = 1
@@ -74,14 +59,15 @@ class Tracker:
         `frame_size`, a track whose predicted box has left the frame (less than `min_inside` of it
         inside) is dropped at once instead of lingering at the edge.
         """
+        cfg = self.config
         boxes = detections.boxes
         predicted = np.array([t.predicted() for t in self.tracks]).reshape(-1, 4)
         iou = iou_matrix(predicted, boxes)
         matched: dict[int, int] = {}
         if iou.size:
             rows, cols = linear_sum_assignment(-iou)
-            matched = {r: c for r, c in zip(rows, cols, strict=True) if iou[r, c] >= self.match_iou}
-        a, b = self.smoothing, self.velocity_gain
+            matched = {r: c for r, c in zip(rows, cols, strict=True) if iou[r, c] >= cfg.match_iou}
+        a, b = cfg.smoothing, cfg.velocity_gain
         for r, track in enumerate(self.tracks):
             if r in matched:
                 c = matched[r]
@@ -94,15 +80,15 @@ class Tracker:
             else:
                 track.box = predicted[r]  # coast on the last velocity
                 track.missed += 1
-        keep = [t.missed <= self.max_missed for t in self.tracks]
+        keep = [t.missed <= cfg.max_missed for t in self.tracks]
         if frame_size is not None and self.tracks:
             share = inside_share(np.array([t.box for t in self.tracks]), frame_size)
-            keep = [k and s >= self.min_inside for k, s in zip(keep, share, strict=True)]
+            keep = [k and s >= cfg.min_inside for k, s in zip(keep, share, strict=True)]
         self.tracks = [t for t, k in zip(self.tracks, keep, strict=True) if k]
         for c in sorted(set(range(len(boxes))) - set(matched.values())):
             self.tracks.append(Track(boxes[c].copy(), float(detections.scores[c])))
         shown = [
-            t for t in self.tracks if t.hits >= self.confirm_frames and t.missed <= self.show_missed
+            t for t in self.tracks if t.hits >= cfg.confirm_frames and t.missed <= cfg.show_missed
         ]
         for track in shown:
             if track.id == 0:
