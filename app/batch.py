@@ -21,9 +21,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from app.atomic import atomic_output
 from app.errors import InputError, Interrupted
 from app.progress import Progress
+from app.sinks import atomic_output
 
 if TYPE_CHECKING:
     from vehicles.model import VehicleModel
@@ -170,8 +170,9 @@ def _classifier(model: str | None) -> VehicleModel:
 
 def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     """Process one video as `roadview process` does, then write its table parts."""
-    from app.assembly import build_stages, make_compositor
-    from app.pipeline import Pipeline, process_video
+    from app.annotators import default_annotators
+    from app.assembly import build_stages
+    from app.drivers import process_video
     from app.runtime import tune_process
     from camera_cal import load_calibration
 
@@ -180,10 +181,16 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     video, record = outputs_of(entry, options.out)
     calibration = load_calibration(Path(options.calibration)) if options.calibration else None
     stages = build_stages(classifier=_classifier(options.model))
-    with Pipeline(calibration, stages=stages) as pipeline:
-        summary = process_video(
-            entry.path, video if options.video else None, pipeline, record, make_compositor()
-        )
+    # In-process: a Dask worker must not fork helpers; parallelism comes from many videos.
+    summary = process_video(
+        entry.path,
+        video if options.video else None,
+        calibration,
+        *stages,
+        record,
+        default_annotators(),
+        vehicles_in_worker=False,
+    )
     rows = [json.loads(line) for line in record.read_text().splitlines()]
     write_table_parts(options.out / TABLE, _key(entry), str(entry.relative), rows)
     span = rows[-1]["time_s"] - rows[0]["time_s"] if len(rows) > 1 else 0.0

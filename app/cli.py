@@ -10,11 +10,12 @@ from typing import Annotated
 
 import typer
 
-from app.errors import InputError, Interrupted
+from app.errors import FrameSizeChanged, InputError, Interrupted
 from app.runtime import tune_process
 from camera_cal import (
     Calibration,
     CalibrationError,
+    CalibrationMismatch,
     calibrate,
     default_calibration_path,
     load_calibration,
@@ -32,16 +33,20 @@ cli = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,  # plain help: no <bool>/<path> type tags, no box drawing
 )
-USER_ERRORS: tuple[type[Exception], ...] = (InputError, CalibrationError, DatasetError, ModelError)
-_verbose = False
+USER_ERRORS: tuple[type[Exception], ...] = (
+    InputError,
+    CalibrationError,
+    DatasetError,
+    ModelError,
+    FrameSizeChanged,
+)
 
 
 @cli.callback()
 def _options(
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Show tracebacks.")] = False,
 ) -> None:
-    global _verbose
-    _verbose = verbose
+    """Options before the command (main() reads --verbose itself, to show tracebacks)."""
 
 
 def _parse_board(board: str) -> tuple[int, int]:
@@ -79,12 +84,15 @@ def calibrate_command(
     ),
 ) -> None:
     """Calibrate the camera from chessboard photos and save the matrix and distortion as JSON."""
+    from app.sinks import atomic_output
+
     size = _parse_board(board)
     calibration = calibrate(list_images(images), board=size)
     for skipped in calibration.images_skipped:
         typer.echo(f"skipped {skipped}", err=True)
     try:
-        save_calibration(calibration, out)
+        with atomic_output(out) as tmp:
+            save_calibration(calibration, tmp)
     except OSError as error:
         raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
     m = calibration.camera_matrix
@@ -129,10 +137,11 @@ def process_command(
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
-    from app.assembly import build_stages, make_compositor
+    from app.annotators import default_annotators
+    from app.assembly import build_stages
+    from app.drivers import process_still, process_video
     from app.outputs import plan_outputs
-    from app.pipeline import Pipeline, process_still, process_video
-    from app.video import check_input, is_image
+    from app.sources import check_input, is_image
 
     check_input(source)
     outputs = plan_outputs(source, output, record, log=lambda m: typer.echo(m, err=True))
@@ -140,16 +149,14 @@ def process_command(
     cal = _calibration(calibration)
     still = is_image(source)
     stages = build_stages(lanes, vehicles, model, keep_debug=insets, still=still)
-    compositor = make_compositor(insets)
+    annotators = default_annotators(insets)
     if still:
-        with Pipeline(cal, stages=stages) as pipeline:
-            summary = process_still(
-                source, output, pipeline, record, compositor, log=lambda m: typer.echo(m, err=True)
-            )
+        summary = process_still(
+            source, output, cal, *stages, record, annotators, log=lambda m: typer.echo(m, err=True)
+        )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
-        with Pipeline(cal, stages=stages, workers=True) as pipeline:
-            summary = process_video(source, output, pipeline, record, compositor, start, end)
+        summary = process_video(source, output, cal, *stages, record, annotators, start, end)
     typer.echo(
         f"wrote {summary.output} ({summary.frames} frames, {summary.fps:.1f} fps)"
         + (f" and {summary.record}" if summary.record else "")
@@ -223,14 +230,14 @@ def debug_command(
     from app.debug import parse_frames, run_debug
     from app.outputs import check_debug_folder
     from app.pipeline import Pipeline
-    from app.video import check_input
+    from app.sources import check_input
 
     span = parse_frames(frames)
     check_input(source)
     folder = out if out is not None else source.with_name(f"{source.stem}_debug")
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
-    pipeline = Pipeline(cal, build_stages(model=model, keep_debug=True))
+    pipeline = Pipeline(cal, *build_stages(model=model, keep_debug=True))
     written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 
@@ -270,6 +277,7 @@ def train_command(
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
+    from app.sinks import atomic_output
     from vehicles.dataset import load_patch_folder, load_patches
     from vehicles.model import save_model
     from vehicles.train import TrainConfig, format_training_report, train_model
@@ -292,7 +300,8 @@ def train_command(
     )
     bar.close()
     try:
-        save_model(model, out)
+        with atomic_output(out) as tmp:
+            save_model(model, tmp)
     except OSError as error:
         raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
     typer.echo(format_training_report(model.report))
@@ -346,15 +355,39 @@ def evaluate_classifier_command(
         )
 
 
+def _verbose(argv: list[str]) -> bool:
+    """Whether --verbose/-v stands before the command name."""
+    for arg in argv:
+        if arg in ("--verbose", "-v"):
+            return True
+        if not arg.startswith("-"):
+            return False
+    return False
+
+
+def _wording(error: Exception) -> str:
+    """The one line a user sees for an expected failure: the library's facts and what to do."""
+    if isinstance(error, CalibrationMismatch):
+        return f"{error}; calibrate this camera or pass --calibration none"
+    if isinstance(error, FrameSizeChanged):
+        return (
+            f"the video's frame size changes from {error.expected[0]}x{error.expected[1]} to "
+            f"{error.got[0]}x{error.got[1]} mid-stream; re-encode it to one size (e.g. ffmpeg "
+            "-vf scale) and process it again"
+        )
+    return str(error)
+
+
 def main() -> None:
     """Entry point: run the CLI, turning expected failures into one line and a non-zero exit."""
+    verbose = _verbose(sys.argv[1:])
     tune_process()
     try:
         cli()
     except USER_ERRORS as error:
-        if _verbose:
+        if verbose:
             traceback.print_exc()
-        typer.echo(f"roadview: error: {error}", err=True)
+        typer.echo(f"roadview: error: {_wording(error)}", err=True)
         sys.exit(2)
     except Interrupted as interrupted:
         typer.echo(f"roadview: interrupted; {interrupted}", err=True)
@@ -367,7 +400,7 @@ def main() -> None:
             typer.echo("roadview: interrupted; no output was written", err=True)
         raise
     except Exception as error:
-        if _verbose:
+        if verbose:
             traceback.print_exc()
         typer.echo(
             f"roadview: unexpected {type(error).__name__}: {error} "

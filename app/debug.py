@@ -11,12 +11,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from app.atomic import ensure_writable_dir
-from app.compose import compose, draw_boxes, heat_picture, lane_inset
+from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
 from app.errors import InputError
-from app.pipeline import FrameOutput, Pipeline
-from app.video import Frame, probe_video, read_frames, write_image
-from lanes.finder import LaneResult
+from app.pipeline import FrameOutput, FrameResult, Pipeline
+from app.sinks import ensure_writable_dir, write_image
+from app.sources import Frame, probe_video, read_frames
 from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
 
@@ -41,25 +40,24 @@ def parse_frames(spec: str) -> tuple[int, int]:
 
 
 def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) -> Frame:
-    """A copy of the frame with the boxes drawn."""
-    out = frame.copy()
-    draw_boxes(out, detections, color)
-    return out
+    """A copy of the frame with the boxes drawn by the compositor's BoxAnnotator."""
+    shown = FrameResult(vehicles=VehicleResult(detections))
+    return compose(frame, shown, [BoxAnnotator(color)])
 
 
 def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.uint8]]:
     """Named pictures of every intermediate of one processed frame, in pipeline order."""
     pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
-    lane = out.results.get("lane")
-    if isinstance(lane, LaneResult) and lane.debug is not None:
+    lane = out.result.lane
+    if lane is not None and lane.debug is not None:
         pictures["lane_mask"] = (lane.debug.mask * 255).astype(np.uint8)
         fit = lane_inset(lane)
         if fit is not None:
             for x1, y1, x2, y2 in lane.debug.left_pixels.windows + lane.debug.right_pixels.windows:
                 cv2.rectangle(fit, (x1, y1), (x2, y2), (0, 255, 0), 1)
             pictures["birdseye_fit"] = fit
-    vehicles = out.results.get("vehicles")
-    if isinstance(vehicles, VehicleResult) and vehicles.debug is not None:
+    vehicles = out.result.vehicles
+    if vehicles is not None and vehicles.debug is not None:
         d = vehicles.debug
         hits = out.undistorted.copy()
         for k, band_hits in enumerate(d.hits):
@@ -139,6 +137,7 @@ def run_debug(
     last = min(last, info.n_frames)
     ensure_writable_dir(out_dir)
     pipeline.prepare(info.size)
+    annotators = default_annotators(insets=True)
     start = max(0, first - WARMUP_FRAMES)
     written: list[Path] = []
     names: list[str] = []
@@ -148,7 +147,7 @@ def run_debug(
         out = pipeline.run(frame)
         if index < first:
             continue
-        pictures = intermediates(out, compose(out.undistorted, out.results, 0.0))
+        pictures = intermediates(out, compose(out.undistorted, out.result, annotators))
         folder = out_dir / f"frame_{index:06d}"
         folder.mkdir(exist_ok=True)
         for k, (name, picture) in enumerate(pictures.items(), start=1):

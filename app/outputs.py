@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from app.errors import InputError
-from app.video import CONTAINERS, IMAGE_SUFFIXES, is_image
+from app.sinks import CONTAINERS
+from app.sources import IMAGE_SUFFIXES, is_image
 
 
 @dataclass(frozen=True)

@@ -1,33 +1,55 @@
-"""The per-frame JSON-lines record: one object per frame, in undistorted-frame pixels."""
+"""The per-frame record: its schema in one place (see `record.schema.json` and the README).
+
+One JSON object per frame, in pixels of the undistorted frame. A stage that did not run has no
+field at all; one that ran and found nothing has an empty value (`[]`, `null`).
+"""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Mapping
+import math
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
+
+import numpy as np
 
 from app.errors import InputError
-from app.stages import StageResult
+from app.pipeline import FrameResult
+from lanes.finder import LaneEstimate
+from vehicles.detections import Detections
+
+
+def lane_record(lane: LaneEstimate | None) -> dict[str, Any] | None:
+    """The `lane` field: boundaries as [x, y] points, radius (null when straight), offset."""
+    if lane is None:
+        return None
+    return {
+        "left": np.round(lane.left, 1).tolist(),
+        "right": np.round(lane.right, 1).tolist(),
+        "curvature_m": round(lane.curvature_m, 1) if math.isfinite(lane.curvature_m) else None,
+        "offset_m": round(lane.offset_m, 3),
+    }
+
+
+def vehicles_record(detections: Detections) -> list[dict[str, Any]]:
+    """The `vehicles` field: id, box [x1, y1, x2, y2] and score of each shown vehicle."""
+    return [
+        {"id": int(i), "box": [round(float(v), 1) for v in box], "score": round(float(s), 3)}
+        for box, s, i in zip(detections.boxes, detections.scores, detections.ids, strict=True)
+    ]
 
 
 def frame_record(
-    index: int, time_s: float, size: tuple[int, int], results: Mapping[str, StageResult]
+    index: int, time_s: float, size: tuple[int, int], result: FrameResult
 ) -> dict[str, Any]:
-    """The record object for one frame; a stage that did not run has no field at all.
-
-    The fields are documented in README ("The record") and in `record.schema.json`.
-    """
+    """The record object of one frame."""
     record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4), "size": list(size)}
-    for key, result in results.items():
-        record[key] = result.to_record()
+    if result.vehicles is not None:
+        record["vehicles"] = vehicles_record(result.vehicles.detections)
+    if result.lane is not None:
+        record["lane"] = lane_record(result.lane.lane)
     return record
-
-
-def write_record_line(handle: TextIO, record: Mapping[str, Any]) -> None:
-    """Append one compact JSON line."""
-    handle.write(json.dumps(record, separators=(",", ":")))
-    handle.write("\n")
 
 
 def read_record(path: Path) -> Iterator[dict[str, Any]]:

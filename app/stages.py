@@ -1,27 +1,17 @@
-"""The small interface through which frame stages (lanes, vehicles) plug into the pipeline."""
+"""The small interface through which a frame stage (lanes, vehicles) runs in a worker process."""
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 
-class StageResult(Protocol):
-    """What a stage found in one frame; it knows its own record form."""
-
-    def to_record(self) -> Any:
-        """JSON-ready value stored under the stage's key in the per-frame record."""
-        ...
-
-
 class FrameStage(Protocol):
     """A stage sees every undistorted RGB frame in order and may keep history between frames."""
 
-    record_key: str
-
-    def process(self, frame: NDArray[np.uint8]) -> StageResult:
+    def process(self, frame: NDArray[np.uint8]) -> object:
         """Analyse one frame; history classes update here."""
         ...
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.stages import FrameStage, StageResult
+from app.stages import FrameStage
 
 
 class WorkerError(RuntimeError):
@@ -63,7 +63,7 @@ class StageWorker:
     """
 
     def __init__(self, stage: FrameStage, frame_bytes: int, slots: int = 2) -> None:
-        self.record_key = stage.record_key
+        self.name = type(stage).__name__
         self.frame_bytes = frame_bytes
         # Anonymous shared maps made before the fork are shared with the child.
         self._slots = [mmap.mmap(-1, max(1, frame_bytes)) for _ in range(slots)]
@@ -72,7 +72,7 @@ class StageWorker:
         self._process = context.Process(
             target=_serve,
             args=(stage, child, self._slots),
-            name=f"roadview-{stage.record_key}",
+            name=f"roadview-{self.name}",
             daemon=True,
         )
         self._process.start()
@@ -95,12 +95,12 @@ class StageWorker:
         self._pending += 1
         self._submitted += 1
 
-    def collect(self) -> tuple[StageResult, float]:
+    def collect(self) -> tuple[object, float]:
         """The oldest submitted frame's result and the ms the stage spent on it."""
         if self._pending == 0:
             raise WorkerError("collect() without a submitted frame")
         self._pending -= 1
-        result: tuple[StageResult, float] = self._answer()
+        result: tuple[object, float] = self._answer()
         return result
 
     def reset(self) -> None:
@@ -127,7 +127,7 @@ class StageWorker:
             status, value = self._conn.recv()
         except (EOFError, OSError):
             raise WorkerError(
-                f"the {self.record_key} worker process died (exit code {self._process.exitcode})"
+                f"the {self.name} worker process died (exit code {self._process.exitcode})"
             ) from None
         if status == "error":
             raise value

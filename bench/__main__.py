@@ -16,11 +16,12 @@ from typing import Any
 import cv2
 import numpy as np
 
+from app.annotators import compose, default_annotators
 from app.assembly import build_stages
-from app.compose import compose
 from app.pipeline import Pipeline
 from app.runtime import tune_process
-from app.video import VideoWriter, probe_video, read_frames
+from app.sinks import VideoWriter
+from app.sources import probe_video, read_frames
 from camera_cal import default_calibration_path, load_calibration
 from vehicles.config import DetectorConfig
 from vehicles.detector import VehicleDetector
@@ -40,7 +41,8 @@ def stage_times(clip: Path) -> dict[str, float]:
     (encode: ffmpeg's wall time for the composed frames, timed in a pass of its own)."""
     info = probe_video(clip)
     # Stages one after the other, so each figure is that stage's own cost on one core.
-    pipeline = Pipeline(load_calibration(default_calibration_path()), build_stages())
+    pipeline = Pipeline(load_calibration(default_calibration_path()), *build_stages())
+    annotators = default_annotators()
     pipeline.prepare(info.size)
     totals: dict[str, float] = {"decode": 0.0, "compose": 0.0}
     composed = []
@@ -53,10 +55,10 @@ def stage_times(clip: Path) -> dict[str, float]:
             break
         totals["decode"] += (time.perf_counter() - t0) * 1000
         out = pipeline.run(frame)
-        for key, value in out.timings_ms.items():
+        for key, value in out.result.timings_ms.items():
             totals[key] = totals.get(key, 0.0) + value
         t0 = time.perf_counter()
-        composed.append(compose(out.undistorted, out.results, 25.0))
+        composed.append(compose(out.undistorted, out.result, annotators))
         totals["compose"] += (time.perf_counter() - t0) * 1000
         n += 1
     with tempfile.TemporaryDirectory() as tmp:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -130,7 +128,7 @@ def calibrate(
 
 
 def save_calibration(calibration: Calibration, path: Path) -> None:
-    """Write the calibration as JSON, atomically (temporary file renamed into place)."""
+    """Write the calibration as JSON to `path` (the caller makes the write atomic)."""
     document = {
         "format_version": FORMAT_VERSION,
         "camera_matrix": np.round(calibration.camera_matrix, 6).tolist(),
@@ -140,16 +138,9 @@ def save_calibration(calibration: Calibration, path: Path) -> None:
         "images_used": list(calibration.images_used),
         "images_skipped": list(calibration.images_skipped),
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(document, handle, indent=2)
-            handle.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with Path(path).open("w") as handle:
+        json.dump(document, handle, indent=2)
+        handle.write("\n")
 
 
 def load_calibration(path: Path) -> Calibration:

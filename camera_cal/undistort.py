@@ -26,12 +26,28 @@ class Undistorter:
         """Undistort one frame; its size must be the one this undistorter was built for."""
         height, width = frame.shape[:2]
         if (width, height) != self.size:
-            raise CalibrationError(
-                f"frame is {width}x{height} but the undistorter was built for "
-                f"{self.size[0]}x{self.size[1]}"
-            )
+            raise CalibrationMismatch((width, height), self.size)
         out = cv2.remap(frame, self.map1, self.map2, interpolation=cv2.INTER_LINEAR)
         return np.asarray(out, dtype=np.uint8)
+
+
+class CalibrationMismatch(CalibrationError):  # noqa: N818 (a kind of CalibrationError)
+    """Frames of a size whose aspect ratio differs from the calibration's: another camera."""
+
+    def __init__(self, frame_size: tuple[int, int], calibration_size: tuple[int, int]) -> None:
+        (fw, fh), (cw, ch) = frame_size, calibration_size
+        super().__init__(
+            f"frame is {fw}x{fh} but the calibration is for {cw}x{ch}, another aspect ratio"
+        )
+        self.frame_size = frame_size
+        self.calibration_size = calibration_size
+
+
+def fits(calibration: Calibration, size: tuple[int, int]) -> bool:
+    """Whether frames of `size` (width, height) have the calibration's aspect ratio."""
+    width, height = size
+    cal_width, cal_height = calibration.image_size
+    return abs(width / height - cal_width / cal_height) <= ASPECT_TOLERANCE * cal_width / cal_height
 
 
 def scaled_camera_matrix(calibration: Calibration, size: tuple[int, int]) -> NDArray[np.float64]:
@@ -40,11 +56,8 @@ def scaled_camera_matrix(calibration: Calibration, size: tuple[int, int]) -> NDA
     cal_width, cal_height = calibration.image_size
     if (width, height) == (cal_width, cal_height):
         return calibration.camera_matrix.copy()
-    if abs(width / height - cal_width / cal_height) > ASPECT_TOLERANCE * cal_width / cal_height:
-        raise CalibrationError(
-            f"frame is {width}x{height} but the calibration is for {cal_width}x{cal_height} with "
-            "another aspect ratio; calibrate this camera or pass --calibration none"
-        )
+    if not fits(calibration, size):
+        raise CalibrationMismatch(size, calibration.image_size)
     sx, sy = width / cal_width, height / cal_height
     matrix = calibration.camera_matrix.copy()
     # Pixel centres move with the half-pixel convention: x' = (x + 0.5) * s - 0.5.

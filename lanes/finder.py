@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,15 +38,6 @@ class LaneEstimate:
     left_fit: Fit  # bird's-eye fits, x = a y^2 + b y + c
     right_fit: Fit
 
-    def to_record(self) -> dict[str, Any]:
-        """JSON-ready record form."""
-        return {
-            "left": np.round(self.left, 1).tolist(),
-            "right": np.round(self.right, 1).tolist(),
-            "curvature_m": round(self.curvature_m, 1) if math.isfinite(self.curvature_m) else None,
-            "offset_m": round(self.offset_m, 3),
-        }
-
 
 @dataclass(frozen=True, eq=False)
 class LaneDebug:
@@ -67,15 +57,9 @@ class LaneResult:
     debug: LaneDebug | None = None
     status: tuple[str, ...] = field(default_factory=tuple)
 
-    def to_record(self) -> dict[str, Any] | None:
-        """The record's `lane` value."""
-        return self.lane.to_record() if self.lane is not None else None
-
 
 class LaneFinder:
     """Finds the ego lane in every frame, keeping a `Line` history per side."""
-
-    record_key = "lane"
 
     def __init__(self, config: LaneConfig | None = None, keep_debug: bool = False) -> None:
         self.config = config if config is not None else LaneConfig()

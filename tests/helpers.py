@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.video import VideoInfo, probe_video, read_frames
+from app.sources import VideoInfo, probe_video, read_frames
 
 
 def run_cli(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.video import ffmpeg_binary, probe_video, read_frames
+from app.sources import ffmpeg_binary, probe_video, read_frames
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
 
@@ -115,7 +115,12 @@ def test_ctrl_c_leaves_no_output(data_dir: Path, tmp_path: Path) -> None:
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(3.0)
+    # Interrupt once frames are being written (a temporary record with some lines in it).
+    deadline = time.time() + 60
+    while time.time() < deadline and not any(
+        p.stat().st_size > 0 for p in tmp_path.glob(".o.*.tmp.jsonl")
+    ):
+        time.sleep(0.01)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 130

@@ -37,7 +37,7 @@ def test_process_video_keeps_frames_size_rate_and_writes_a_record(
 
 
 def test_process_video_undistorts(test_video: Path, tmp_path: Path) -> None:
-    from app.video import probe_video, read_frames
+    from app.sources import probe_video, read_frames
     from camera_cal import build_undistorter, default_calibration_path, load_calibration
 
     out = tmp_path / "undistorted.mp4"

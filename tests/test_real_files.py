@@ -14,7 +14,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from app.video import ffmpeg_binary, probe_video, read_frames
+from app.sources import ffmpeg_binary, probe_video, read_frames
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
 SCHEMA = json.loads((Path(__file__).parents[1] / "app" / "record.schema.json").read_text())

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from app.evaluate import FrameLabels, evaluate, iou, load_labels
-from app.video import probe_video, read_frames
+from app.record import vehicles_record
+from app.sources import probe_video, read_frames
 from camera_cal import build_undistorter, default_calibration_path, load_calibration
 from tests.helpers import process_clip
 from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
@@ -296,7 +297,7 @@ def _moved_records(
         found = detector.process(np.asarray(moved)).detections
         boxes = (found.boxes - [dx, dy, dx, dy]) / scale
         back = Detections.from_boxes(boxes, found.scores, found.ids)
-        records.append({"frame": index, "vehicles": back.to_record(), "lane": None})
+        records.append({"frame": index, "vehicles": vehicles_record(back), "lane": None})
     return records
 
 

@@ -1,14 +1,14 @@
-"""The pipeline's worker processes give the same outputs, in order, as running in-process."""
+"""A stage in a worker process gives the same outputs, in order, as running in-process."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from app.pipeline import Pipeline
 from app.workers import StageWorker
 
 
@@ -19,22 +19,19 @@ class Seen:
     count: int
     mean: float
 
-    def to_record(self) -> Any:
-        return {"count": self.count, "mean": self.mean}
-
 
 class Counter:
     """A stage with history: counts frames since the last reset; fails on request."""
 
     def __init__(self, key: str, fail_at: int | None = None) -> None:
-        self.record_key = key
+        self.key = key
         self.count = 0
         self.fail_at = fail_at
 
     def process(self, frame: np.ndarray) -> Seen:
         self.count += 1
         if self.count == self.fail_at:
-            raise ValueError(f"{self.record_key} failed on frame {self.count}")
+            raise ValueError(f"{self.key} failed on frame {self.count}")
         return Seen(self.count, float(frame.mean()))
 
     def reset(self) -> None:
@@ -46,31 +43,50 @@ def _frames(n: int, size: tuple[int, int] = (32, 24)) -> list[np.ndarray]:
     return [rng.integers(0, 255, (size[1], size[0], 3), dtype=np.uint8) for _ in range(n)]
 
 
-def _run(workers: bool, frames: list[np.ndarray]) -> list[dict[str, Any]]:
-    with Pipeline(None, [Counter("a"), Counter("b")], workers=workers) as pipeline:
-        pipeline.prepare((frames[0].shape[1], frames[0].shape[0]))
-        return [
-            {key: result.to_record() for key, result in out.results.items()}
-            for out in pipeline.stream(iter(frames))
-        ]
+def _through_worker(stage: Counter, frames: list[np.ndarray]) -> list[Seen]:
+    """Each frame submitted and its result collected one frame later, as the pipeline does."""
+    worker = StageWorker(stage, frame_bytes=frames[0].nbytes)
+    try:
+        out: list[Seen] = []
+        for k, frame in enumerate(frames):
+            worker.submit(frame)
+            if k:
+                out.append(worker.collect()[0])  # type: ignore[arg-type]
+        out.append(worker.collect()[0])  # type: ignore[arg-type]
+        worker.reset()
+        worker.submit(frames[0])
+        out.append(worker.collect()[0])  # type: ignore[arg-type]
+        return out
+    finally:
+        worker.close()
 
 
-def test_workers_match_in_process_order_and_history() -> None:
+def test_worker_matches_in_process_order_and_history() -> None:
     frames = _frames(7)
-    in_process = _run(False, frames)
-    assert _run(True, frames) == in_process
-    assert [r["b"]["count"] for r in in_process] == list(range(1, 8))
-    assert [r["b"]["mean"] for r in in_process] == [float(f.mean()) for f in frames]
+    here = Counter("b")
+    expected = [here.process(f) for f in frames] + [Seen(1, float(frames[0].mean()))]
+    assert _through_worker(Counter("b"), frames) == expected  # reset() restarts the history
 
 
-def test_prepare_resets_history_in_the_worker() -> None:
-    frames = _frames(3)
-    with Pipeline(None, [Counter("a"), Counter("b")], workers=True) as pipeline:
-        pipeline.prepare((32, 24))
-        list(pipeline.stream(iter(frames)))
-        pipeline.prepare((32, 24))
-        counts = [out.results["b"].to_record()["count"] for out in pipeline.stream(iter(frames))]
-    assert counts == [1, 2, 3]
+def test_pipeline_with_the_vehicle_worker_equals_in_process(test_video: Path) -> None:
+    from app.assembly import build_stages
+    from app.pipeline import Pipeline
+    from app.record import frame_record
+    from app.sources import probe_video, read_frames
+
+    info = probe_video(test_video)
+    frames = list(read_frames(test_video, info, 0, 12))
+
+    def records(in_worker: bool) -> list[dict[str, Any]]:
+        lanes, vehicles = build_stages()
+        with Pipeline(None, lanes, vehicles, vehicles_in_worker=in_worker) as pipeline:
+            pipeline.prepare(info.size)
+            return [
+                frame_record(k, 0.0, info.size, out.result)
+                for k, out in enumerate(pipeline.stream(iter(frames)))
+            ]
+
+    assert records(True) == records(False)
 
 
 def test_worker_error_reaches_the_caller_and_the_child_stops() -> None:
@@ -79,7 +95,7 @@ def test_worker_error_reaches_the_caller_and_the_child_stops() -> None:
     frames = _frames(2)
     worker.submit(frames[0])
     worker.submit(frames[1])
-    assert worker.collect()[0].to_record()["count"] == 1
+    assert worker.collect()[0] == Seen(1, float(frames[0].mean()))
     with pytest.raises(ValueError, match="b failed on frame 2"):
         worker.collect()
     process = worker._process

@@ -43,13 +43,6 @@ class Detections:
         boxes = np.clip(self.boxes, 0.0, [width, height, width, height])
         return Detections(boxes, self.scores, self.ids)
 
-    def to_record(self) -> list[dict[str, Any]]:
-        """JSON-ready list: id, box (rounded pixels) and score of each detection."""
-        return [
-            {"id": int(i), "box": [round(float(v), 1) for v in box], "score": round(float(s), 3)}
-            for box, s, i in zip(self.boxes, self.scores, self.ids, strict=True)
-        ]
-
 
 def _intersection(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Pairwise intersection areas of two sets of [x1, y1, x2, y2] boxes: (len(a), len(b))."""

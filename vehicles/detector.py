@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,10 +33,6 @@ class VehicleResult:
     detections: Detections
     debug: VehicleDebug | None = field(default=None)
 
-    def to_record(self) -> list[dict[str, Any]]:
-        """The record's `vehicles` value."""
-        return self.detections.to_record()
-
 
 def footprint(
     boxes: NDArray[np.float64], part: tuple[float, float, float, float]
@@ -53,8 +48,6 @@ class VehicleDetector:
     Bands are split into two alternating sets so each frame searches about half of them; the heat
     history spans several frames, so every scale still contributes to every decision.
     """
-
-    record_key = "vehicles"
 
     def __init__(
         self,

@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import platform
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -85,7 +83,8 @@ def _versions() -> dict[str, str]:
 
 
 def save_model(model: VehicleModel, path: Path) -> None:
-    """Write the model as .npz of arrays plus a JSON header, atomically."""
+    """Write the model to `path` as .npz of arrays plus a JSON header (the caller makes the write
+    atomic)."""
     header = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -104,15 +103,8 @@ def save_model(model: VehicleModel, path: Path) -> None:
         "scalars": np.array([model.intercept, model.platt_a, model.platt_b]),
         "header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.npz", dir=path.parent)
-    os.close(fd)
-    try:
-        np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    with Path(path).open("wb") as handle:
+        np.savez_compressed(handle, **arrays)  # type: ignore[arg-type]
 
 
 def load_model(path: Path | None = None) -> VehicleModel:

@@ -1,4 +1,8 @@
-"""Video and still-image input/output through ffmpeg pipes (the binary imageio-ffmpeg ships)."""
+"""Frame sources: probing a video, decoding its frames through ffmpeg, reading stills.
+
+ffmpeg is the binary the imageio-ffmpeg package ships. Decoding applies a rotation tag, so every
+frame, size and coordinate downstream is of the upright picture.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +15,7 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from queue import Full, Queue
+from queue import Empty, Queue
 from typing import IO
 
 import cv2
@@ -22,42 +26,6 @@ from app.errors import InputError
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
 Frame = NDArray[np.uint8]  # H x W x 3, RGB
-
-
-@dataclass(frozen=True)
-class Container:
-    """How roadview encodes into one output container: video codec options and audio codec."""
-
-    video: tuple[str, ...]
-    audio: str
-
-
-_X264 = ("-c:v", "libx264", "-preset", "ultrafast", "-crf", "20", "-pix_fmt", "yuv420p")
-# VP9 in real-time mode: about as fast as the processing; quality set by CRF alone.
-_VP9 = (
-    "-c:v",
-    "libvpx-vp9",
-    "-deadline",
-    "realtime",
-    "-cpu-used",
-    "8",
-    "-row-mt",
-    "1",
-    "-crf",
-    "32",
-    "-b:v",
-    "0",
-    "-pix_fmt",
-    "yuv420p",
-)
-CONTAINERS: dict[str, Container] = {
-    ".mp4": Container((*_X264, "-movflags", "+faststart"), "aac"),
-    ".m4v": Container((*_X264, "-movflags", "+faststart"), "aac"),
-    ".mov": Container((*_X264, "-movflags", "+faststart"), "aac"),
-    ".mkv": Container(_X264, "aac"),
-    ".avi": Container(_X264, "libmp3lame"),
-    ".webm": Container(_VP9, "libopus"),
-}
 
 
 @functools.cache
@@ -278,123 +246,6 @@ def _read_exactly(stream: IO[bytes], n: int) -> bytes | None:
     return b"".join(chunks) if len(chunks) > 1 else chunks[0]
 
 
-def container_for(path: Path) -> Container:
-    """The encoding for an output name, or an InputError naming the containers roadview writes."""
-    container = CONTAINERS.get(path.suffix.lower())
-    if container is None:
-        names = ", ".join(sorted(CONTAINERS))
-        raise InputError(
-            f"roadview cannot write a {path.suffix or 'suffix-less'} video ({path}); "
-            f"name the output with one of {names}"
-        )
-    return container
-
-
-class VideoWriter:
-    """Encode RGB frames through an ffmpeg pipe, in the codec the output's suffix calls for.
-
-    Odd frame sizes are padded by one pixel at the right or bottom (the codecs need even sizes),
-    so coordinates stay those of the input. Audio is copied from `audio_from`, cut to the frames'
-    span and never used to end the video: every frame written is in the file.
-    """
-
-    def __init__(
-        self,
-        path: Path,
-        size: tuple[int, int],
-        fps: float,
-        audio_from: Path | None = None,
-        audio_start_s: float = 0.0,
-        audio_seconds: float | None = None,
-        preset: str = "ultrafast",
-    ) -> None:
-        self.size = size
-        container = container_for(path)
-        width, height = size
-        command = [
-            ffmpeg_binary(),
-            "-y",
-            "-nostdin",
-            "-loglevel",
-            "error",
-            "-f",
-            "rawvideo",
-            "-pix_fmt",
-            "rgb24",
-            "-s",
-            f"{width}x{height}",
-            "-framerate",
-            f"{fps:.6f}",
-            "-i",
-            "-",
-        ]
-        if audio_from is not None:
-            if audio_start_s > 0:
-                command += ["-ss", f"{audio_start_s:.6f}"]
-            if audio_seconds is not None:
-                command += ["-t", f"{audio_seconds:.6f}"]
-            command += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0?"]
-            command += ["-c:a", container.audio]
-        if width % 2 or height % 2:
-            command += ["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"]
-        video = list(container.video)
-        if "-preset" in video:
-            video[video.index("-preset") + 1] = preset
-        command += [*video, str(path)]
-        # Messages go to a file: a full stderr pipe would stall ffmpeg and then this writer.
-        self._log = tempfile.TemporaryFile()  # noqa: SIM115 (lives as long as the writer)
-        self._process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=self._log)
-        # Frames go to ffmpeg from a thread so a full pipe never stalls the processing.
-        self._queue: Queue[Frame | None] = Queue(maxsize=4)
-        self._broken = False
-        self._thread = threading.Thread(target=self._pump, daemon=True)
-        self._thread.start()
-
-    def _pump(self) -> None:
-        assert self._process.stdin is not None
-        while (frame := self._queue.get()) is not None:
-            if self._broken:
-                continue
-            try:
-                self._process.stdin.write(frame.tobytes())
-            except (BrokenPipeError, ValueError, OSError):
-                self._broken = True
-
-    def write(self, frame: Frame) -> None:
-        """Append one RGB frame of the writer's size."""
-        if (frame.shape[1], frame.shape[0]) != self.size:
-            raise ValueError(f"frame size {frame.shape[1]}x{frame.shape[0]} != {self.size}")
-        if self._broken:
-            self.close()  # raises with ffmpeg's message
-        self._queue.put(np.ascontiguousarray(frame))
-
-    def close(self) -> None:
-        """Finish the file; raise InputError if ffmpeg failed."""
-        if self._thread.is_alive():
-            self._queue.put(None)
-            self._thread.join()
-        if self._process.stdin is not None and not self._process.stdin.closed:
-            with contextlib.suppress(BrokenPipeError):
-                self._process.stdin.close()
-        code = self._process.wait()
-        self._log.seek(0)
-        messages = self._log.read().decode(errors="replace").strip()
-        self._log.close()
-        if code != 0:
-            last = messages.splitlines()[-1] if messages else f"exit code {code}"
-            raise InputError(f"ffmpeg could not write the video: {last}")
-
-    def abort(self) -> None:
-        """Stop encoding without finishing the file."""
-        self._broken = True
-        self._process.kill()
-        self._process.wait()
-        if self._thread.is_alive():
-            with contextlib.suppress(Full):
-                self._queue.put_nowait(None)
-        self._log.close()
-
-
 def read_image(path: Path) -> Frame:
     """A still as 8-bit RGB: grey, 16-bit and 4-channel images are converted, not refused."""
     check_input(path)
@@ -418,7 +269,31 @@ def read_image(path: Path) -> Frame:
     return np.ascontiguousarray(image)
 
 
-def write_image(path: Path, image: Frame) -> None:
-    """Write an RGB image; the format follows the suffix."""
-    if not cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-        raise InputError(f"cannot write image {path}; use a .png or .jpg name")
+def prefetch(frames: Iterator[Frame], depth: int = 4) -> Iterator[Frame]:
+    """Decode ahead in a thread so reading the pipe overlaps with processing."""
+    queue: Queue[Frame | BaseException | None] = Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def pump() -> None:
+        try:
+            for frame in frames:
+                if stop.is_set():
+                    break
+                queue.put(frame)
+            queue.put(None)
+        except BaseException as error:  # handed to the consumer, which re-raises it
+            queue.put(error)
+
+    thread = threading.Thread(target=pump, daemon=True)
+    thread.start()
+    try:
+        while (item := queue.get()) is not None:
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        while thread.is_alive():
+            with contextlib.suppress(Empty):
+                queue.get_nowait()
+            thread.join(timeout=0.01)

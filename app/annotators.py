@@ -1,19 +1,26 @@
-"""The compositor: lane area and boundaries, vehicle boxes with ids, a heads-up panel, insets."""
+"""Annotators: small objects that draw one kind of result onto the scene, composable in a list.
+
+Each has `annotate(scene, result) -> scene` and draws on (and returns) the scene it is given, as
+`supervision`'s annotators do; `compose` copies the frame and applies a list of them. The debug
+pictures reuse them.
+"""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+import time
+from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from app.stages import StageResult
+from app.pipeline import FrameResult
 from lanes.finder import LaneEstimate, LaneResult
 from vehicles.detections import Detections
-from vehicles.detector import VehicleResult
 
 Frame = NDArray[np.uint8]
 LANE_FILL = (0, 200, 90)
@@ -21,14 +28,6 @@ LANE_EDGE = (255, 230, 0)
 BOX = (255, 60, 60)
 TEXT = (255, 255, 255)
 PANEL = (20, 20, 20)
-
-
-@dataclass(frozen=True)
-class ComposeOptions:
-    """What the compositor draws."""
-
-    lane_alpha: float = 0.3
-    insets: bool = False
 
 
 def _scale(frame: Frame) -> float:
@@ -162,37 +161,95 @@ def heat_picture(heat: NDArray[np.float32], threshold: float) -> NDArray[np.uint
     )
 
 
-def compose(
-    frame: Frame,
-    results: Mapping[str, StageResult],
-    fps: float,
-    options: ComposeOptions | None = None,
-) -> Frame:
-    """The annotated frame: lane, vehicles, panel (and insets); the input is not modified."""
-    options = options if options is not None else ComposeOptions()
-    out = frame.copy()
-    lane_result = results.get("lane")
-    vehicle_result = results.get("vehicles")
-    lane = lane_result.lane if isinstance(lane_result, LaneResult) else None
-    if lane is not None:
-        draw_lane(out, lane, options.lane_alpha)
-    count = None
-    if isinstance(vehicle_result, VehicleResult):
-        draw_boxes(out, vehicle_result.detections)
-        count = len(vehicle_result.detections)
-    draw_panel(
-        out,
-        hud_lines(lane, count, fps)
-        if lane_result is not None or count is not None
-        else ([f"Processing: {fps:.1f} fps"] if fps > 0 else []),
-    )
-    if options.insets:
+class Annotator(Protocol):
+    """Draws one kind of result onto the scene."""
+
+    def annotate(self, scene: Frame, result: FrameResult) -> Frame:
+        """Draw onto `scene` (in place) and return it."""
+        ...
+
+
+@dataclass(frozen=True)
+class LaneAnnotator:
+    """The ego lane: a translucent area between its boundaries, and the boundaries."""
+
+    alpha: float = 0.3
+
+    def annotate(self, scene: Frame, result: FrameResult) -> Frame:
+        """Draw the lane when there is one."""
+        if result.lane is not None and result.lane.lane is not None:
+            draw_lane(scene, result.lane.lane, self.alpha)
+        return scene
+
+
+@dataclass(frozen=True)
+class BoxAnnotator:
+    """Each shown vehicle's box with its id and score."""
+
+    color: tuple[int, int, int] = BOX
+
+    def annotate(self, scene: Frame, result: FrameResult) -> Frame:
+        """Draw the vehicles' boxes."""
+        if result.vehicles is not None:
+            draw_boxes(scene, result.vehicles.detections, self.color)
+        return scene
+
+
+class PanelAnnotator:
+    """The heads-up panel: curvature, offset, vehicles in view, and the processing rate.
+
+    The rate is measured here, over the last `window` frames annotated (a still shows none).
+    """
+
+    def __init__(self, window: int = 25) -> None:
+        self._times: deque[float] = deque(maxlen=window)
+
+    @property
+    def fps(self) -> float:
+        """Frames annotated per second over the recent window."""
+        if len(self._times) < 2:
+            return 0.0
+        return (len(self._times) - 1) / max(self._times[-1] - self._times[0], 1e-9)
+
+    def annotate(self, scene: Frame, result: FrameResult) -> Frame:
+        """Draw the panel for the stages that ran."""
+        self._times.append(time.perf_counter())
+        lane = result.lane.lane if result.lane is not None else None
+        count = len(result.vehicles.detections) if result.vehicles is not None else None
+        if result.lane is not None or count is not None:
+            lines = hud_lines(lane, count, self.fps)
+        else:
+            lines = [f"Processing: {self.fps:.1f} fps"] if self.fps > 0 else []
+        draw_panel(scene, lines)
+        return scene
+
+
+@dataclass(frozen=True)
+class InsetAnnotator:
+    """The bird's-eye lane fit and the vehicle heat history, small at the top right."""
+
+    def annotate(self, scene: Frame, result: FrameResult) -> Frame:
+        """Draw the insets of the stages that kept their intermediates."""
         pictures = []
-        if isinstance(lane_result, LaneResult) and (p := lane_inset(lane_result)) is not None:
+        if result.lane is not None and (p := lane_inset(result.lane)) is not None:
             pictures.append(p)
-        if isinstance(vehicle_result, VehicleResult) and vehicle_result.debug is not None:
-            pictures.append(
-                heat_picture(vehicle_result.debug.history_heat, vehicle_result.debug.heat_threshold)
-            )
-        draw_insets(out, pictures)
-    return out
+        if result.vehicles is not None and (d := result.vehicles.debug) is not None:
+            pictures.append(heat_picture(d.history_heat, d.heat_threshold))
+        draw_insets(scene, pictures)
+        return scene
+
+
+def default_annotators(insets: bool = False) -> list[Annotator]:
+    """What `process` and `batch` draw: lane, boxes, panel (and insets)."""
+    chain: list[Annotator] = [LaneAnnotator(), BoxAnnotator(), PanelAnnotator()]
+    if insets:
+        chain.append(InsetAnnotator())
+    return chain
+
+
+def compose(frame: Frame, result: FrameResult, annotators: Sequence[Annotator]) -> Frame:
+    """A copy of the frame with every annotator applied in turn (the input is not modified)."""
+    scene = frame.copy()
+    for annotator in annotators:
+        scene = annotator.annotate(scene, result)
+    return scene

@@ -1,0 +1,153 @@
+"""Drivers: a video or a still from its source, through the pipeline, into its sinks.
+
+Every output appears only when the run succeeds (the sinks write temporary files and rename them).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+from app.annotators import Annotator, compose
+from app.errors import InputError
+from app.pipeline import Pipeline
+from app.progress import Progress
+from app.record import frame_record
+from app.runtime import warm_up_opencv
+from app.sinks import ImageSink, RecordSink, VideoSink
+from app.sources import prefetch, probe_video, read_frames, read_image
+from camera_cal import Calibration, fits
+from lanes.finder import LaneFinder
+from vehicles.detector import VehicleDetector
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a processing run did."""
+
+    frames: int
+    seconds: float
+    output: Path | None
+    record: Path | None
+
+    @property
+    def fps(self) -> float:
+        """End-to-end frames per second."""
+        return self.frames / self.seconds if self.seconds > 0 else math.inf
+
+
+def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) -> tuple[int, int]:
+    """First and one-past-last frame index for a time range in seconds."""
+    if start_s < 0 or (end_s is not None and end_s <= start_s):
+        raise InputError("--start must be >= 0 and --end later than --start")
+    first = round(start_s * fps)
+    last = n_frames if end_s is None else min(n_frames, round(end_s * fps))
+    if first >= n_frames:
+        raise InputError(f"--start {start_s}s is past the end of the video ({n_frames / fps:.2f}s)")
+    return first, last
+
+
+def process_video(
+    source: Path,
+    output: Path | None,
+    calibration: Calibration | None,
+    lanes: LaneFinder | None,
+    vehicles: VehicleDetector | None,
+    record: Path | None = None,
+    annotators: Sequence[Annotator] = (),
+    start_s: float = 0.0,
+    end_s: float | None = None,
+    vehicles_in_worker: bool = True,
+) -> RunSummary:
+    """Process a video into an annotated video and/or a record; outputs appear only on success.
+
+    With `output` None no video is composed or encoded (the record alone). With
+    `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
+    """
+    warm_up = warm_up_opencv()
+    try:
+        info = probe_video(source)
+        first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
+    finally:
+        # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
+        warm_up.join()
+    started = time.perf_counter()
+    count = 0
+    progress = Progress(last - first, label=source.name)
+    with (
+        Pipeline(calibration, lanes, vehicles, vehicles_in_worker) as pipeline,
+        ExitStack() as sinks,
+    ):
+        pipeline.prepare(info.size)
+        records = sinks.enter_context(RecordSink(record)) if record is not None else None
+        video = None
+        if output is not None:
+            video = sinks.enter_context(
+                VideoSink(
+                    output,
+                    info.size,
+                    info.fps,
+                    audio_from=source if info.has_audio else None,
+                    audio_start_s=first / info.fps,
+                    audio_seconds=(last - first) / info.fps,
+                )
+            )
+        # Without --end every decoded frame is read (the probed count is an estimate).
+        decoded = prefetch(read_frames(source, info, first, last if end_s is not None else None))
+        for offset, out in enumerate(pipeline.stream(decoded)):
+            index = first + offset
+            if video is not None:
+                video.write(compose(out.undistorted, out.result, annotators))
+            if records is not None:
+                records.write(frame_record(index, index / info.fps, info.size, out.result))
+            count += 1
+            progress.update()
+        progress.close()
+        expected = last - first
+        if count == 0 or count < expected - max(2, expected // 50):
+            raise InputError(
+                f"{source} is truncated or damaged: decoded {count} of {expected} frames; "
+                "re-export or re-download the video"
+            )
+    return RunSummary(count, time.perf_counter() - started, output, record)
+
+
+def process_still(
+    source: Path,
+    output: Path,
+    calibration: Calibration | None,
+    lanes: LaneFinder | None,
+    vehicles: VehicleDetector | None,
+    record: Path | None = None,
+    annotators: Sequence[Annotator] = (),
+    log: Callable[[str], None] = lambda message: None,
+) -> RunSummary:
+    """Process one still into an annotated image (and a one-line record).
+
+    A still whose aspect ratio is not the calibration's (another camera, or a crop) is processed
+    without undistortion, and says so.
+    """
+    image = read_image(source)
+    size = (image.shape[1], image.shape[0])
+    started = time.perf_counter()
+    if calibration is not None and not fits(calibration, size):
+        cw, ch = calibration.image_size
+        log(
+            f"note: {source} is {size[0]}x{size[1]}, not of the calibration's aspect ratio "
+            f"({cw}x{ch}); processing it without undistortion"
+        )
+        calibration = None
+    with Pipeline(calibration, lanes, vehicles) as pipeline:
+        pipeline.prepare(size)
+        out = pipeline.run(image)
+    with ExitStack() as sinks:
+        sinks.enter_context(ImageSink(output)).write(
+            compose(out.undistorted, out.result, annotators)
+        )
+        if record is not None:
+            sinks.enter_context(RecordSink(record)).write(frame_record(0, 0.0, size, out.result))
+    return RunSummary(1, time.perf_counter() - started, output, record)
