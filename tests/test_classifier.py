@@ -182,3 +182,20 @@ def test_mismatched_and_foreign_model_files(tmp_path: Path) -> None:
         vm.FORMAT_VERSION = original
     with pytest.raises(ModelError, match="format version"):
         load_model(tmp_path / "future.npz")
+
+
+def test_exported_model_gives_scikit_learns_probabilities() -> None:
+    """The arrays in the model file reproduce the calibrated scikit-learn estimator exactly."""
+    from vehicles.train import export, fit_calibrated
+
+    rng = np.random.default_rng(0)
+    config = FeatureConfig()
+    x = rng.normal(size=(600, config.length)).astype(np.float32)
+    x[:, 5] *= 30  # a badly scaled feature: the scaler inside the pipeline must be exported too
+    y = (x[:, 0] + 0.5 * rng.normal(size=600) > 0).astype(np.int8)
+    calibrated = fit_calibrated(x, y, np.arange(600) // 10, 1e-3, TrainConfig())
+    model = export(calibrated, config, {})
+    expected = calibrated.predict_proba(x[:50])[:, 1]
+    np.testing.assert_allclose(
+        model.probability(model.decision_function(x[:50])), expected, atol=1e-7
+    )

@@ -1,5 +1,7 @@
-"""Training: features in parallel, standardisation, C chosen by grouped cross-validation, Platt
-calibration on out-of-fold decision values, and an honest report (grouped and random splits)."""
+"""Training with scikit-learn's own estimators: Pipeline(StandardScaler, LinearSVC), C chosen by
+GridSearchCV over GroupKFold (the scaler is fitted inside each fold), Platt-calibrated by
+CalibratedClassifierCV(method="sigmoid") on out-of-fold decisions, and an honest report (grouped
+and random splits). The fitted estimators are exported as plain arrays (`VehicleModel`)."""
 
 from __future__ import annotations
 
@@ -11,9 +13,10 @@ from typing import Any
 import numpy as np
 from joblib import Parallel, delayed
 from numpy.typing import NDArray
-from sklearn.linear_model import LogisticRegression
+from sklearn.calibration import CalibratedClassifierCV
 from sklearn.metrics import accuracy_score, confusion_matrix, precision_recall_fscore_support
-from sklearn.model_selection import GroupKFold, GroupShuffleSplit, train_test_split
+from sklearn.model_selection import GridSearchCV, GroupKFold, GroupShuffleSplit, train_test_split
+from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
 
@@ -29,7 +32,7 @@ class TrainConfig:
     """How a model is trained."""
 
     c_grid: tuple[float, ...] = (3e-5, 1e-4, 3e-4, 1e-3)
-    folds: int = 3
+    folds: int = 5  # each fold trains on 80 % of the groups; 3 folds chose C by noise
     test_size: float = 0.2
     seed: int = 0
     n_jobs: int = 2
@@ -63,43 +66,75 @@ def extract_features(
     return np.concatenate(rows) if rows else np.zeros((0, config.length), np.float32)
 
 
-def _fit_svm(x: NDArray[np.float32], y: NDArray[np.int8], c: float, max_iter: int) -> LinearSVC:
-    return LinearSVC(C=c, dual=True, max_iter=max_iter, random_state=0).fit(x, y)
-
-
-def _fold_decisions(
-    x: NDArray[np.float32],
-    y: NDArray[np.int8],
-    train: NDArray[np.intp],
-    val: NDArray[np.intp],
-    c: float,
-    max_iter: int,
-) -> NDArray[np.float64]:
-    return np.asarray(_fit_svm(x[train], y[train], c, max_iter).decision_function(x[val]))
+def svm_pipeline(c: float = 1.0, max_iter: int = 5000) -> Pipeline:
+    """Standardisation and a linear SVM, one estimator (so each fold fits its own scaler)."""
+    return Pipeline(
+        [
+            ("scale", StandardScaler()),
+            ("svm", LinearSVC(C=c, dual=True, max_iter=max_iter, random_state=0)),
+        ]
+    )
 
 
 def search_c(
     x: NDArray[np.float32], y: NDArray[np.int8], groups: NDArray[np.int64], cfg: TrainConfig
-) -> tuple[float, dict[str, float], NDArray[np.float64]]:
-    """C with the best grouped cross-validated accuracy, all accuracies, and its out-of-fold
-    decision values (for calibration)."""
-    splits = list(GroupKFold(n_splits=cfg.folds).split(x, y, groups))
-    jobs = [(c, f) for c in cfg.c_grid for f in range(len(splits))]
-    outs = Parallel(n_jobs=cfg.n_jobs)(
-        delayed(_fold_decisions)(x, y, splits[f][0], splits[f][1], c, cfg.max_iter) for c, f in jobs
+) -> tuple[float, dict[str, float]]:
+    """The C of the best grouped cross-validated accuracy (the smallest on a tie) and every C's
+    mean accuracy over the folds."""
+    search = GridSearchCV(
+        svm_pipeline(max_iter=cfg.max_iter),
+        {"svm__C": list(cfg.c_grid)},
+        cv=GroupKFold(n_splits=cfg.folds),
+        scoring="accuracy",
+        n_jobs=cfg.n_jobs,
+        refit=False,
     )
-    decisions = {c: np.zeros(len(y)) for c in cfg.c_grid}
-    for (c, f), out in zip(jobs, outs, strict=True):
-        decisions[c][splits[f][1]] = out
-    accuracy = {f"{c:g}": float(((decisions[c] > 0) == (y == 1)).mean()) for c in cfg.c_grid}
+    search.fit(x, y, groups=groups)
+    accuracy = {
+        f"{c:g}": float(a)
+        for c, a in zip(
+            search.cv_results_["param_svm__C"], search.cv_results_["mean_test_score"], strict=True
+        )
+    }
     best = max(cfg.c_grid, key=lambda c: (accuracy[f"{c:g}"], -c))
-    return best, accuracy, decisions[best]
+    return best, accuracy
 
 
-def fit_platt(decision: NDArray[np.float64], y: NDArray[np.int8]) -> tuple[float, float]:
-    """Sigmoid (A, B) with P(vehicle) = 1 / (1 + exp(A d + B)), fit on held-out decisions."""
-    lr = LogisticRegression(C=1e6).fit(decision.reshape(-1, 1), y)
-    return -float(lr.coef_[0, 0]), -float(lr.intercept_[0])
+def fit_calibrated(
+    x: NDArray[np.float32],
+    y: NDArray[np.int8],
+    groups: NDArray[np.int64],
+    c: float,
+    cfg: TrainConfig,
+) -> CalibratedClassifierCV:
+    """The SVM pipeline fitted on every row, with a sigmoid fitted on its grouped out-of-fold
+    decision values (one estimator, not an ensemble, so it exports as one linear model)."""
+    splits = list(GroupKFold(n_splits=cfg.folds).split(x, y, groups))
+    calibrated = CalibratedClassifierCV(
+        svm_pipeline(c, cfg.max_iter), method="sigmoid", cv=splits, ensemble=False
+    )
+    return calibrated.fit(x, y)
+
+
+def export(
+    calibrated: CalibratedClassifierCV, config: FeatureConfig, report: dict[str, Any]
+) -> VehicleModel:
+    """The fitted estimators as the plain arrays the dense search and the model file use."""
+    (member,) = calibrated.calibrated_classifiers_
+    pipeline: Pipeline = member.estimator
+    scaler: StandardScaler = pipeline.named_steps["scale"]
+    svm: LinearSVC = pipeline.named_steps["svm"]
+    (sigmoid,) = member.calibrators
+    return VehicleModel(
+        config=config,
+        weights=np.asarray(svm.coef_[0], dtype=np.float64),
+        intercept=float(svm.intercept_[0]),
+        mean=np.asarray(scaler.mean_, dtype=np.float64),
+        scale=np.asarray(scaler.scale_, dtype=np.float64),
+        platt_a=float(sigmoid.a_),
+        platt_b=float(sigmoid.b_),
+        report=report,
+    )
 
 
 def scores(y_true: NDArray[np.int8], y_pred: NDArray[np.int8]) -> dict[str, Any]:
@@ -113,13 +148,6 @@ def scores(y_true: NDArray[np.int8], y_pred: NDArray[np.int8]) -> dict[str, Any]
         "confusion_matrix": confusion_matrix(y_true, y_pred, labels=[0, 1]).tolist(),
         "n": len(y_true),
     }
-
-
-def _fit_scaled(
-    x: NDArray[np.float32], y: NDArray[np.int8], c: float, max_iter: int
-) -> tuple[StandardScaler, LinearSVC]:
-    scaler = StandardScaler().fit(x)
-    return scaler, _fit_svm(scaler.transform(x).astype(np.float32), y, c, max_iter)
 
 
 def train_model(
@@ -150,26 +178,25 @@ def train_model(
     train, test = next(
         GroupShuffleSplit(1, test_size=cfg.test_size, random_state=cfg.seed).split(x, y, groups)
     )
-    scaler = StandardScaler().fit(x[train])
-    x_train = scaler.transform(x[train]).astype(np.float32)
-    best_c, cv_accuracy, oof = search_c(x_train, y[train], groups[train], cfg)
+    best_c, cv_accuracy = search_c(x[train], y[train], groups[train], cfg)
     timings["search_s"] = time.perf_counter() - t0
     log(f"C search {cv_accuracy} -> C = {best_c:g} in {timings['search_s']:.1f} s")
 
     t0 = time.perf_counter()
-    platt_a, platt_b = fit_platt(oof, y[train])
-    svm = _fit_svm(x_train, y[train], best_c, cfg.max_iter)
-    grouped = scores(y[test], svm.predict(scaler.transform(x[test]).astype(np.float32)))
+    held_out = fit_calibrated(x[train], y[train], groups[train], best_c, cfg)
+    grouped = scores(y[test], held_out.predict(x[test]))
     rtrain, rtest = train_test_split(
         np.arange(len(y)), test_size=cfg.test_size, random_state=cfg.seed, stratify=y
     )
-    r_scaler, r_svm = _fit_scaled(x[rtrain], y[rtrain], best_c, cfg.max_iter)
-    random_split = scores(y[rtest], r_svm.predict(r_scaler.transform(x[rtest]).astype(np.float32)))
+    plain = svm_pipeline(best_c, cfg.max_iter).fit(x[rtrain], y[rtrain])
+    random_split = scores(y[rtest], plain.predict(x[rtest]))
     timings["evaluate_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    final_scaler, final_svm = _fit_scaled(x, y, best_c, cfg.max_iter)
+    final = fit_calibrated(x, y, groups, best_c, cfg)
     timings["final_fit_s"] = time.perf_counter() - t0
+    (member,) = final.calibrated_classifiers_
+    (sigmoid,) = member.calibrators
     report = {
         "grouped_split": grouped,
         "random_split": random_split,
@@ -180,20 +207,11 @@ def train_model(
         "n_non_vehicles": int((y == 0).sum()),
         "n_hard_negatives": len(extra_negatives),
         "n_groups": len(np.unique(groups)),
-        "platt": [platt_a, platt_b],
+        "platt": [float(sigmoid.a_), float(sigmoid.b_)],
         "timings_s": {k: round(v, 2) for k, v in timings.items()},
         "seed": cfg.seed,
     }
-    return VehicleModel(
-        config=config,
-        weights=np.asarray(final_svm.coef_[0], dtype=np.float64),
-        intercept=float(final_svm.intercept_[0]),
-        mean=np.asarray(final_scaler.mean_, dtype=np.float64),
-        scale=np.asarray(final_scaler.scale_, dtype=np.float64),
-        platt_a=platt_a,
-        platt_b=platt_b,
-        report=report,
-    )
+    return export(final, config, report)
 
 
 def format_training_report(report: dict[str, Any]) -> str:
