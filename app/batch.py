@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from app.errors import InputError, Interrupted
+from app.errors import USER_ERRORS, InputError, Interrupted, describe
 from app.progress import Progress
 from app.sinks import atomic_output
 
@@ -143,8 +143,8 @@ def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str
             time.perf_counter() - started,
             worker,
         )
-    except InputError as error:
-        message = str(error)
+    except USER_ERRORS as error:
+        message = describe(error)
     except Exception as error:  # any failure of one input must not stop the others
         message = f"unexpected {type(error).__name__}: {error}"
     return ManifestRow(

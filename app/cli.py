@@ -10,20 +10,16 @@ from typing import Annotated
 
 import typer
 
-from app.errors import FrameSizeChanged, InputError, Interrupted
+from app.errors import USER_ERRORS, InputError, Interrupted, describe
 from app.runtime import tune_process
 from camera_cal import (
     Calibration,
-    CalibrationError,
-    CalibrationMismatch,
     calibrate,
     default_calibration_path,
     load_calibration,
     save_calibration,
 )
 from camera_cal.calibration import list_images
-from vehicles.dataset import DatasetError
-from vehicles.model import ModelError
 
 cli = typer.Typer(
     name="roadview",
@@ -32,13 +28,6 @@ cli = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,  # plain help: no <bool>/<path> type tags, no box drawing
-)
-USER_ERRORS: tuple[type[Exception], ...] = (
-    InputError,
-    CalibrationError,
-    DatasetError,
-    ModelError,
-    FrameSizeChanged,
 )
 
 
@@ -365,19 +354,6 @@ def _verbose(argv: list[str]) -> bool:
     return False
 
 
-def _wording(error: Exception) -> str:
-    """The one line a user sees for an expected failure: the library's facts and what to do."""
-    if isinstance(error, CalibrationMismatch):
-        return f"{error}; calibrate this camera or pass --calibration none"
-    if isinstance(error, FrameSizeChanged):
-        return (
-            f"the video's frame size changes from {error.expected[0]}x{error.expected[1]} to "
-            f"{error.got[0]}x{error.got[1]} mid-stream; re-encode it to one size (e.g. ffmpeg "
-            "-vf scale) and process it again"
-        )
-    return str(error)
-
-
 def main() -> None:
     """Entry point: run the CLI, turning expected failures into one line and a non-zero exit."""
     verbose = _verbose(sys.argv[1:])
@@ -387,7 +363,7 @@ def main() -> None:
     except USER_ERRORS as error:
         if verbose:
             traceback.print_exc()
-        typer.echo(f"roadview: error: {_wording(error)}", err=True)
+        typer.echo(f"roadview: error: {describe(error)}", err=True)
         sys.exit(2)
     except Interrupted as interrupted:
         typer.echo(f"roadview: interrupted; {interrupted}", err=True)

@@ -1,4 +1,15 @@
-"""The error type for bad input that the CLI reports as one line."""
+"""Errors the user can fix, and the one line that says what is wrong and what to do.
+
+The stage packages' errors state facts (a size, a path, a count); `describe` adds the fix in the
+words of roadview's command line, which those packages do not know.
+"""
+
+from __future__ import annotations
+
+from camera_cal import CalibrationError, CalibrationMismatch
+from camera_cal.calibration import CalibrationFileError, ChessboardImagesError, TooFewBoardsError
+from vehicles.dataset import DatasetError
+from vehicles.model import ModelError
 
 
 class InputError(Exception):
@@ -16,3 +27,37 @@ class FrameSizeChanged(Exception):  # noqa: N818 (a fact about the input, worded
         super().__init__(f"frame size changed from {expected} to {got} mid-stream")
         self.expected = expected
         self.got = got
+
+
+USER_ERRORS: tuple[type[Exception], ...] = (
+    InputError,
+    CalibrationError,
+    DatasetError,
+    ModelError,
+    FrameSizeChanged,
+)
+
+
+def describe(error: Exception) -> str:
+    """The one line a user sees for an expected failure: the library's facts and what to do."""
+    fixes: list[tuple[type[Exception], str]] = [
+        (CalibrationMismatch, "calibrate this camera or pass --calibration none"),
+        (
+            CalibrationFileError,
+            "make one with 'roadview calibrate' or pass --calibration FILE|none",
+        ),
+        (ChessboardImagesError, "pass --images DIR with .jpg/.png photos of the chessboard"),
+        (TooFewBoardsError, "check --board (inner corners, e.g. 9x6) or add photos"),
+        (ModelError, "retrain with 'make train' or pass another --model"),
+        (DatasetError, "gather the data with 'make data' or pass --data DIR"),
+    ]
+    for kind, fix in fixes:
+        if isinstance(error, kind):
+            return f"{error}; {fix}"
+    if isinstance(error, FrameSizeChanged):
+        return (
+            f"the video's frame size changes from {error.expected[0]}x{error.expected[1]} to "
+            f"{error.got[0]}x{error.got[1]} mid-stream; re-encode it to one size (e.g. ffmpeg "
+            "-vf scale) and process it again"
+        )
+    return str(error)

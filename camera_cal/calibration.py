@@ -18,7 +18,19 @@ IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp")
 
 
 class CalibrationError(Exception):
-    """A calibration cannot be computed, read, or applied; the message says what to do."""
+    """A calibration cannot be computed, read, or applied; the message states the facts."""
+
+
+class ChessboardImagesError(CalibrationError):
+    """The chessboard photos are missing or unreadable."""
+
+
+class TooFewBoardsError(CalibrationError):
+    """Too few photos show the whole board (wrong board size, or too few good photos)."""
+
+
+class CalibrationFileError(CalibrationError):
+    """A calibration file is missing, unreadable, or not a roadview calibration."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,9 +75,7 @@ def _board_object_points(board: tuple[int, int]) -> NDArray[np.float32]:
 def list_images(folder: Path) -> list[Path]:
     """Image files in a folder, sorted naturally (calibration2 before calibration10)."""
     if not folder.is_dir():
-        raise CalibrationError(
-            f"{folder} is not a folder; pass --images DIR with chessboard photos"
-        )
+        raise ChessboardImagesError(f"{folder} is not a folder of chessboard photos")
     files = [p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES]
 
     def natural(p: Path) -> tuple[str, int]:
@@ -81,16 +91,14 @@ def calibrate(
 ) -> Calibration:
     """Calibrate from chessboard photos; photos without the whole board are skipped and named."""
     if not paths:
-        raise CalibrationError(
-            "no chessboard images given; pass --images DIR with .jpg/.png photos"
-        )
+        raise ChessboardImagesError("no chessboard images given")
     object_grid = _board_object_points(board)
     images: list[tuple[str, NDArray[np.uint8] | None]] = [
         (path.name, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)) for path in paths
     ]
     sizes = Counter((im.shape[1], im.shape[0]) for _, im in images if im is not None)
     if not sizes:
-        raise CalibrationError("none of the chessboard files could be read as an image")
+        raise ChessboardImagesError("none of the chessboard files could be read as an image")
     size = sizes.most_common(1)[0][0]
     object_points: list[NDArray[np.float32]] = []
     image_points: list[NDArray[np.float32]] = []
@@ -112,9 +120,9 @@ def calibrate(
         image_points.append(corners)
         used.append(name)
     if len(used) < min_boards:
-        raise CalibrationError(
+        raise TooFewBoardsError(
             f"only {len(used)} of {len(paths)} images show the whole {board[0]}x{board[1]} board "
-            f"(need {min_boards}); check --board (inner corners, e.g. 9x6) or add photos"
+            f"(need {min_boards})"
         )
     rms, matrix, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
     return Calibration(
@@ -148,17 +156,12 @@ def load_calibration(path: Path) -> Calibration:
     try:
         document = json.loads(Path(path).read_text())
     except FileNotFoundError:
-        raise CalibrationError(
-            f"calibration file {path} does not exist; run 'roadview calibrate'"
-        ) from None
+        raise CalibrationFileError(f"calibration file {path} does not exist") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise CalibrationError(
-            f"calibration file {path} is not valid JSON ({error}); run 'roadview calibrate'"
-        ) from None
+        raise CalibrationFileError(f"calibration file {path} is not valid JSON ({error})") from None
     if not isinstance(document, dict) or document.get("format_version") != FORMAT_VERSION:
-        raise CalibrationError(
-            f"calibration file {path} is not a roadview calibration of format {FORMAT_VERSION}; "
-            "run 'roadview calibrate' to make one"
+        raise CalibrationFileError(
+            f"calibration file {path} is not a roadview calibration of format {FORMAT_VERSION}"
         )
     try:
         matrix = np.asarray(document["camera_matrix"], dtype=np.float64)
@@ -166,13 +169,11 @@ def load_calibration(path: Path) -> Calibration:
         width, height = (int(v) for v in document["image_size"])
         rms = float(document.get("rms", 0.0))
     except (KeyError, TypeError, ValueError):
-        raise CalibrationError(
-            f"calibration file {path} lacks a field or has a wrong one; run 'roadview calibrate'"
+        raise CalibrationFileError(
+            f"calibration file {path} lacks a field or has a wrong one"
         ) from None
     if matrix.shape != (3, 3) or dist.size not in (4, 5, 8, 12, 14) or width <= 0 or height <= 0:
-        raise CalibrationError(
-            f"calibration file {path} has wrong shapes; run 'roadview calibrate' to remake it"
-        )
+        raise CalibrationFileError(f"calibration file {path} has wrong shapes")
     return Calibration(
         camera_matrix=matrix,
         dist_coeffs=dist,

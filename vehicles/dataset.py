@@ -17,7 +17,7 @@ GROUP_CHUNK = 30  # consecutive frames in one group at most, so a long run is no
 
 
 class DatasetError(Exception):
-    """The training data cannot be found or read; the message says what to do."""
+    """The training data cannot be found or read; the message states the facts."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,7 +64,7 @@ def _entries(root: Path, kind: str) -> Iterator[tuple[str, bytes]]:
                 if name.lower().endswith(PATCH_SUFFIXES) and "__MACOSX" not in name:
                     yield name, zf.read(name)
     else:
-        raise DatasetError(f"neither {folder} nor {archive} exists; run 'make data' or pass --data")
+        raise DatasetError(f"neither {folder} nor {archive} exists")
 
 
 def group_key(name: str) -> tuple[str, int]:

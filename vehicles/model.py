@@ -25,7 +25,7 @@ ARRAYS = ("weights", "mean", "scale", "scalars")
 
 
 class ModelError(Exception):
-    """A model file is missing, corrupt, or of another version; the message says what to do."""
+    """A model file is missing, corrupt, or of another version; the message states the facts."""
 
 
 def default_model_path() -> Path:
@@ -112,36 +112,35 @@ def load_model(path: Path | None = None) -> VehicleModel:
     never unpickles."""
     path = Path(path) if path is not None else default_model_path()
     if not path.is_file():
-        raise ModelError(f"model file {path} does not exist; run 'make train' or pass --model")
-    fix = "retrain with 'make train' or pass another --model"
+        raise ModelError(f"model file {path} does not exist")
     try:
         with np.load(io.BytesIO(path.read_bytes()), allow_pickle=False) as npz:
             arrays = {name: np.asarray(npz[name]) for name in (*ARRAYS, "header")}
         header = json.loads(arrays["header"].tobytes().decode())
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError):
-        raise ModelError(f"model file {path} is corrupt or not a roadview model; {fix}") from None
+        raise ModelError(f"model file {path} is corrupt or not a roadview model") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
-        raise ModelError(f"{path} is not a roadview vehicle model; {fix}")
+        raise ModelError(f"{path} is not a roadview vehicle model")
     if header.get("format_version") != FORMAT_VERSION:
         raise ModelError(
             f"model {path} has format version {header.get('format_version')}, this roadview "
-            f"reads {FORMAT_VERSION}; {fix}"
+            f"reads {FORMAT_VERSION}"
         )
     try:
         config = FeatureConfig(**header["feature_config"])
     except (TypeError, ValueError, KeyError):
-        raise ModelError(f"model {path} has an invalid feature config; {fix}") from None
+        raise ModelError(f"model {path} has an invalid feature config") from None
     n = config.length
     for name in ("weights", "mean", "scale"):
         if arrays[name].shape != (n,):
             raise ModelError(
                 f"model {path}: {name} has shape {arrays[name].shape}, expected "
-                f"({n},) for its feature config; {fix}"
+                f"({n},) for its feature config"
             )
     if arrays["scalars"].shape != (3,) or not np.all(np.isfinite(arrays["weights"])):
-        raise ModelError(f"model {path} has invalid values; {fix}")
+        raise ModelError(f"model {path} has invalid values")
     if np.any(arrays["scale"] <= 0):
-        raise ModelError(f"model {path} has non-positive feature scales; {fix}")
+        raise ModelError(f"model {path} has non-positive feature scales")
     intercept, platt_a, platt_b = (float(v) for v in arrays["scalars"])
     return VehicleModel(
         config=config,
