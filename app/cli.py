@@ -31,6 +31,16 @@ cli = typer.Typer(
 )
 
 
+# Options that several commands share.
+DEFAULT_CALIBRATION = str(default_calibration_path())
+CalibrationOption = Annotated[
+    str, typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion.")
+]
+ModelOption = Annotated[
+    Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
+]
+
+
 @cli.callback()
 def _options(
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Show tracebacks.")] = False,
@@ -110,19 +120,14 @@ def process_command(
     record: Annotated[
         Path | None, typer.Option("--json", help="Per-frame JSON-lines record.")
     ] = None,
-    calibration: Annotated[
-        str,
-        typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion."),
-    ] = str(default_calibration_path()),
+    calibration: CalibrationOption = DEFAULT_CALIBRATION,
     start: Annotated[float, typer.Option(help="Start time in seconds.")] = 0.0,
     end: Annotated[float | None, typer.Option(help="End time in seconds.")] = None,
     lanes: Annotated[bool, typer.Option("--lanes/--no-lanes", help="Find the ego lane.")] = True,
     vehicles: Annotated[
         bool, typer.Option("--vehicles/--no-vehicles", help="Detect and track vehicles.")
     ] = True,
-    model: Annotated[
-        Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
-    ] = None,
+    model: ModelOption = None,
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
@@ -169,13 +174,8 @@ def batch_command(
         bool, typer.Option("--video/--no-video", help="Write annotated videos.")
     ] = True,
     force: Annotated[bool, typer.Option(help="Redo inputs already done.")] = False,
-    calibration: Annotated[
-        str,
-        typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion."),
-    ] = str(default_calibration_path()),
-    model: Annotated[
-        Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
-    ] = None,
+    calibration: CalibrationOption = DEFAULT_CALIBRATION,
+    model: ModelOption = None,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, iter_rows, run_batch
@@ -206,13 +206,8 @@ def debug_command(
     out: Annotated[
         Path | None, typer.Option(help="Folder (default: NAME_debug next to the input).")
     ] = None,
-    calibration: Annotated[
-        str,
-        typer.Option(metavar="FILE|none", help="Calibration JSON, or 'none' to skip undistortion."),
-    ] = str(default_calibration_path()),
-    model: Annotated[
-        Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
-    ] = None,
+    calibration: CalibrationOption = DEFAULT_CALIBRATION,
+    model: ModelOption = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages

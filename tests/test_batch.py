@@ -32,6 +32,11 @@ def inputs(tmp_path_factory: pytest.TempPathFactory, data_dir: Path) -> Path:
     return folder
 
 
+def _batch(inputs: Path, out: Path, *options: str) -> list[str]:
+    """The command line of `roadview batch INPUTS --out OUT OPTIONS`."""
+    return [sys.executable, "-m", "app", "batch", str(inputs), "--out", str(out), *options]
+
+
 def _manifest(out: Path) -> dict[str, dict[str, object]]:
     return {
         Path(str(r["path"])).name: r
@@ -149,18 +154,7 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
         time.sleep(4)
         out = tmp_path / "out"
         batch = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "app",
-                "batch",
-                str(inputs),
-                "--out",
-                str(out),
-                "--scheduler",
-                address,
-                "--no-video",
-            ],
+            _batch(inputs, out, "--scheduler", address, "--no-video"),
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -193,18 +187,7 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
 
 def test_ctrl_c_keeps_what_finished_and_the_next_run_resumes(inputs: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    command = [
-        sys.executable,
-        "-m",
-        "app",
-        "batch",
-        str(inputs),
-        "--out",
-        str(out),
-        "--workers",
-        "1",
-        "--no-video",
-    ]
+    command = _batch(inputs, out, "--workers", "1", "--no-video")
     batch = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     manifest = out / "table" / "manifest.parquet"
     deadline = time.time() + 120
