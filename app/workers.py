@@ -26,9 +26,14 @@ class WorkerError(RuntimeError):
     """The child process died or answered out of turn."""
 
 
-def _serve(stage: FrameStage, conn: Connection, slots: list[mmap.mmap]) -> None:
+def _serve(
+    stage: FrameStage, conn: Connection, slots: list[mmap.mmap], parent_end: Connection
+) -> None:
     """Child loop: frames in, (result, ms) out; errors are sent back instead of raised."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    # The fork copied the parent's end of the pipe too: closed here, so that if the parent dies
+    # (even killed) this child reads end-of-file and exits instead of waiting for ever.
+    parent_end.close()
     while True:
         try:
             command, argument = conn.recv()
@@ -71,7 +76,7 @@ class StageWorker:
         self._conn, child = context.Pipe()
         self._process = context.Process(
             target=_serve,
-            args=(stage, child, self._slots),
+            args=(stage, child, self._slots, self._conn),
             name=f"roadview-{self.name}",
             daemon=True,
         )

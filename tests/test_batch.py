@@ -99,14 +99,24 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _worker_running_ffmpeg() -> int | None:
-    """The pid of a process whose child is an ffmpeg decoding frames (a Dask worker at work)."""
+def _parent(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
+def _worker_running_ffmpeg(ancestors: set[int]) -> int | None:
+    """The pid of a Dask worker (a descendant of `ancestors`, the test's own processes) whose
+    child is an ffmpeg decoding frames: a worker at work. Nothing else on the machine is touched."""
     for proc in Path("/proc").iterdir():
         try:
             args = (proc / "cmdline").read_bytes().split(b"\0")
-            if args and b"ffmpeg" in args[0] and b"rawvideo" in args:
-                stat = (proc / "stat").read_text()
-                return int(stat.rsplit(")", 1)[1].split()[1])
+            if not (args and b"ffmpeg" in args[0] and b"rawvideo" in args):
+                continue
+            worker = _parent(int(proc.name))
+            pid = worker
+            while pid > 1:
+                if pid in ancestors:
+                    return worker
+                pid = _parent(pid)
         except (OSError, ValueError, IndexError):
             continue
     return None
@@ -163,7 +173,7 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
         deadline = time.time() + 60
         killed = False
         while time.time() < deadline and not killed:
-            worker = _worker_running_ffmpeg()
+            worker = _worker_running_ffmpeg({p.pid for p in procs})
             if worker is not None:
                 os.kill(worker, signal.SIGKILL)
                 killed = True

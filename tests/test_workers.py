@@ -110,3 +110,44 @@ def test_frame_larger_than_the_slots_is_refused() -> None:
             worker.submit(_frames(1)[0])
     finally:
         worker.close()
+
+
+def test_worker_exits_when_its_parent_is_killed(test_video: Path, tmp_path: Path) -> None:
+    """A `process` killed outright (SIGKILL, no clean-up) leaves no vehicle worker behind
+    holding its output pipes open."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    command = [
+        sys.executable,
+        "-m",
+        "app",
+        "process",
+        str(test_video),
+        "-o",
+        str(tmp_path / "o.mp4"),
+        "--json",
+        str(tmp_path / "o.jsonl"),
+    ]
+    main = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while time.time() < deadline and not any(
+        p.stat().st_size > 0 for p in tmp_path.glob(".o.*.tmp.jsonl")
+    ):
+        time.sleep(0.01)
+    children = Path(f"/proc/{main.pid}/task/{main.pid}/children").read_text().split()
+    workers = [int(c) for c in children if b"python" in Path(f"/proc/{c}/cmdline").read_bytes()]
+    assert workers, "the vehicle worker process was not found"
+    os.kill(main.pid, signal.SIGKILL)
+    main.wait()
+    time.sleep(2.0)
+    alive = [
+        w
+        for w in workers
+        if Path(f"/proc/{w}").exists()
+        and "Z" not in Path(f"/proc/{w}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    ]
+    assert not alive
