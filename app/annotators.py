@@ -68,21 +68,30 @@ def _label(frame: Frame, text: str, x: int, y: int, color: tuple[int, int, int])
     cv2.putText(frame, text, (x + 3, y - base - 1), font, size, TEXT, thick, cv2.LINE_AA)
 
 
-def draw_boxes(frame: Frame, detections: Detections, color: tuple[int, int, int] = BOX) -> None:
-    """Each box with its id (when it has one) and score."""
+def draw_boxes(
+    frame: Frame,
+    detections: Detections,
+    color: tuple[int, int, int] = BOX,
+    distances: dict[int, float] | None = None,
+) -> None:
+    """Each box with its id (when it has one), and its distance in metres or its score."""
     s = _scale(frame)
+    distances = distances or {}
     for box, score, track_id in zip(
         detections.boxes, detections.scores, detections.ids, strict=True
     ):
         x1, y1, x2, y2 = (round(float(v)) for v in box)
         cv2.rectangle(frame, (x1, y1), (x2, y2), color, max(2, round(3 * s)), cv2.LINE_AA)
-        text = f"#{track_id} {score:.2f}" if track_id >= 0 else f"{score:.2f}"
+        what = f"{distances[track_id]:.0f} m" if track_id in distances else f"{score:.2f}"
+        text = f"#{track_id} {what}" if track_id >= 0 else what
         _label(frame, text, x1, y1, color)
 
 
-def hud_lines(lane: LaneEstimate | None, vehicles: int | None, fps: float) -> list[str]:
+def hud_lines(
+    lane: LaneEstimate | None, vehicles: int | None, fps: float, speed_kmh: float | None = None
+) -> list[str]:
     """The text of the heads-up panel."""
-    lines = []
+    lines = [f"Speed: {speed_kmh:.0f} km/h"] if speed_kmh is not None else []
     if lane is None:
         lines.append("Lane: searching")
     else:
@@ -191,7 +200,9 @@ class BoxAnnotator:
     def annotate(self, scene: Frame, result: FrameResult) -> Frame:
         """Draw the vehicles' boxes."""
         if result.vehicles is not None:
-            draw_boxes(scene, result.vehicles.detections, self.color)
+            facts = result.facts.vehicles if result.facts is not None else ()
+            distances = {f.id: f.distance_m for f in facts}
+            draw_boxes(scene, result.vehicles.detections, self.color, distances)
         return scene
 
 
@@ -217,7 +228,8 @@ class PanelAnnotator:
         lane = result.lane.lane if result.lane is not None else None
         count = len(result.vehicles.detections) if result.vehicles is not None else None
         if result.lane is not None or count is not None:
-            lines = hud_lines(lane, count, self.fps)
+            speed = result.facts.speed_kmh if result.facts is not None else None
+            lines = hud_lines(lane, count, self.fps, speed)
         else:
             lines = [f"Processing: {self.fps:.1f} fps"] if self.fps > 0 else []
         draw_panel(scene, lines)

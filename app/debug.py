@@ -136,7 +136,7 @@ def run_debug(
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
     ensure_writable_dir(out_dir)
-    pipeline.prepare(info.size)
+    pipeline.prepare(info.size, info.fps)
     annotators = default_annotators(insets=True)
     start = max(0, first - WARMUP_FRAMES)
     written: list[Path] = []

@@ -82,7 +82,7 @@ def process_video(
         Pipeline(calibration, lanes, vehicles, vehicles_in_worker) as pipeline,
         ExitStack() as sinks,
     ):
-        pipeline.prepare(info.size)
+        pipeline.prepare(info.size, info.fps)
         records = sinks.enter_context(RecordSink(record)) if record is not None else None
         video = None
         if output is not None:

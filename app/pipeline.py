@@ -13,11 +13,14 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 from app.errors import FrameSizeChanged
+from app.facts import FactsTracker, FrameFacts, RoadGeometry
 from app.sources import Frame
 from app.stages import FrameStage
 from app.workers import StageWorker
 from camera_cal import Calibration, Undistorter, build_undistorter
+from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
+from lanes.perspective import birdseye_for
 from vehicles.detector import VehicleDetector, VehicleResult
 
 
@@ -27,6 +30,7 @@ class FrameResult:
 
     lane: LaneResult | None = None
     vehicles: VehicleResult | None = None
+    facts: FrameFacts | None = None
     timings_ms: dict[str, float] = field(default_factory=dict)
 
 
@@ -61,6 +65,8 @@ class Pipeline:
         self.size: tuple[int, int] | None = None
         self._undistorter: Undistorter | None = None
         self._worker: StageWorker | None = None
+        self._geometry: RoadGeometry | None = None
+        self._facts: FactsTracker | None = None
 
     def __enter__(self) -> Pipeline:
         return self
@@ -78,8 +84,9 @@ class Pipeline:
     def _stages(self) -> list[FrameStage]:
         return [s for s in (self.lanes, self.vehicles) if s is not None]
 
-    def prepare(self, size: tuple[int, int]) -> None:
-        """Get ready for a clip of frames of `size` (width, height): maps, fresh history, worker.
+    def prepare(self, size: tuple[int, int], fps: float = 0.0) -> None:
+        """Get ready for a clip of frames of `size` (width, height) at `fps` (0 for a still):
+        maps, road geometry, fresh history, worker.
 
         Raises `camera_cal.CalibrationMismatch` when the calibration does not fit the size.
         """
@@ -87,6 +94,9 @@ class Pipeline:
             build_undistorter(self.calibration, size) if self.calibration is not None else None
         )
         self.size = size
+        view = birdseye_for(size, self.lanes.config if self.lanes is not None else LaneConfig())
+        self._geometry = RoadGeometry.of(view)
+        self._facts = FactsTracker(fps)
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:
             self.close()  # a larger frame than the slots hold: start the worker again
@@ -149,4 +159,12 @@ class Pipeline:
             t0 = time.perf_counter()
             vehicles = self.vehicles.process(undistorted)
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
-        return FrameOutput(undistorted, FrameResult(lane, vehicles, timings))
+        facts = None
+        if self._facts is not None and self._geometry is not None:
+            facts = self._facts.update(
+                vehicles.detections if vehicles is not None else None,
+                lane.lane if lane is not None else None,
+                lane.advance_m if lane is not None else None,
+                self._geometry,
+            )
+        return FrameOutput(undistorted, FrameResult(lane, vehicles, facts, timings))

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from app.errors import InputError
+from app.facts import VehicleFacts
 from app.pipeline import FrameResult
 from lanes.finder import LaneEstimate
 from vehicles.detections import Detections
@@ -40,15 +41,38 @@ def vehicles_record(detections: Detections) -> list[dict[str, Any]]:
     ]
 
 
+def _rounded(value: float | None, digits: int) -> float | None:
+    return round(value, digits) if value is not None else None
+
+
+def vehicle_facts_record(facts: VehicleFacts) -> dict[str, Any]:
+    """A vehicle's facts in metres: distance, lateral offset, lane, closing speed."""
+    return {
+        "distance_m": round(facts.distance_m, 1),
+        "lateral_m": round(facts.lateral_m, 2),
+        "lane": facts.lane,
+        "closing_mps": _rounded(facts.closing_mps, 2),
+    }
+
+
 def frame_record(
     index: int, time_s: float, size: tuple[int, int], result: FrameResult
 ) -> dict[str, Any]:
     """The record object of one frame."""
     record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4), "size": list(size)}
+    facts = result.facts
     if result.vehicles is not None:
-        record["vehicles"] = vehicles_record(result.vehicles.detections)
+        vehicles = vehicles_record(result.vehicles.detections)
+        by_id = {f.id: f for f in facts.vehicles} if facts is not None else {}
+        for vehicle in vehicles:
+            if (known := by_id.get(vehicle["id"])) is not None:
+                vehicle.update(vehicle_facts_record(known))
+        record["vehicles"] = vehicles
+        record["headway_s"] = _rounded(facts.headway_s, 2) if facts is not None else None
+        record["ttc_s"] = _rounded(facts.ttc_s, 2) if facts is not None else None
     if result.lane is not None:
         record["lane"] = lane_record(result.lane.lane)
+        record["speed_kmh"] = _rounded(facts.speed_kmh, 1) if facts is not None else None
     return record
 
 

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 from lanes.config import LaneConfig
 from lanes.line import Line
 from lanes.measure import lane_offset, lane_widths, radius_of_curvature
+from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.search import (
     Fit,
@@ -56,6 +57,7 @@ class LaneResult:
     lane: LaneEstimate | None
     debug: LaneDebug | None = None
     status: tuple[str, ...] = field(default_factory=tuple)
+    advance_m: float | None = None  # how far the road moved towards the camera since last frame
 
 
 class LaneFinder:
@@ -66,12 +68,14 @@ class LaneFinder:
         self.keep_debug = keep_debug
         self.left = Line(self.config.history, self.config.max_misses)
         self.right = Line(self.config.history, self.config.max_misses)
+        self.motion = RoadMotion()
         self._view: BirdsEye | None = None
 
     def reset(self) -> None:
-        """Forget both lines' history."""
+        """Forget both lines' history and the road's motion."""
         self.left.reset()
         self.right.reset()
+        self.motion.reset()
 
     def view(self, frame_size: tuple[int, int]) -> BirdsEye:
         """The bird's-eye warp for this frame size (built once per size)."""
@@ -85,6 +89,7 @@ class LaneFinder:
         view = self.view((frame.shape[1], frame.shape[0]))
         bw, bh = view.size
         birdseye = view.warp(frame)
+        advance = self.motion.update(birdseye, view.ym_per_px)
         mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px)
         paint = Paint.of(mask)
         hints = (cfg.dst_left_x * bw, cfg.dst_right_x * bw)
@@ -103,7 +108,7 @@ class LaneFinder:
         status = self._check_and_update(fits, pixels, view)
         lane = self._estimate(view)
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
-        return LaneResult(lane, debug, status)
+        return LaneResult(lane, debug, status, advance)
 
     def _prior(self, rows: int) -> LanePrior | None:
         """Heading and near width of the smoothed lane, if both lines have history."""

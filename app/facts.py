@@ -1,0 +1,181 @@
+"""Facts from the pictures: distance and lateral position of each vehicle, its lane, how fast it
+closes in, our own speed, headway and time to collision.
+
+Geometry is the flat-road model of the lane stage's bird's-eye warp: that homography maps road
+points of the frame to metres on the road. For a camera over a flat road the bird's-eye row of a
+frame row v is an affine function of 1 / (v - v0), v0 the horizon row where the warp's
+denominator vanishes; so the distance from the camera is Z(v) = K / (v - v0), with K read off the
+warp itself (no focal length or camera height needed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lanes.finder import LaneEstimate
+from lanes.perspective import BirdsEye
+from lanes.search import evaluate_fit
+from vehicles.detections import Detections
+
+LANE_WIDTH_M = 3.7  # when no lane is known: lanes of the usual width around the camera
+
+
+@dataclass(frozen=True)
+class RoadGeometry:
+    """The flat-road model of one frame size: horizon row and the scale K of Z = K / (v - v0)."""
+
+    view: BirdsEye
+    horizon_y: float
+    k: float
+
+    @classmethod
+    def of(cls, view: BirdsEye) -> RoadGeometry:
+        """The model implied by a bird's-eye warp."""
+        w, h = view.frame_size
+        m = view.matrix
+        cx = w / 2
+        horizon = -(m[2, 0] * cx + m[2, 2]) / m[2, 1]
+        bottom = h - 1.0
+        near, far = bottom, horizon + 0.25 * (bottom - horizon)
+        rows = view.to_birdseye(np.array([[cx, near], [cx, far]]))[:, 1]
+        # D(far) - D(near) in metres = K (1/(far - v0) - 1/(near - v0)).
+        metres = (rows[0] - rows[1]) * view.ym_per_px
+        k = metres / (1 / (far - horizon) - 1 / (near - horizon))
+        return cls(view, float(horizon), float(k))
+
+    def distance(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance ahead of the camera, in metres, of road points at frame rows `rows`
+        (inf at or above the horizon)."""
+        below = np.asarray(rows, np.float64) - self.horizon_y
+        with np.errstate(divide="ignore"):
+            return np.where(below > 0.5, self.k / np.maximum(below, 0.5), np.inf)
+
+    def lateral(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Metres to the right of the camera's axis of road points (x, y) of the frame."""
+        pts = np.asarray(points, np.float64).reshape(-1, 2)
+        ahead = np.column_stack([np.full(len(pts), self.view.frame_size[0] / 2), pts[:, 1]])
+        xs = self.view.to_birdseye(pts)[:, 0] - self.view.to_birdseye(ahead)[:, 0]
+        return np.asarray(xs * self.view.xm_per_px)
+
+
+def lane_of(
+    lateral_m: float, distance_m: float, lane: LaneEstimate | None, geometry: RoadGeometry
+) -> str:
+    """'ego', 'left', 'right' or 'other': where a road point lies relative to our lane.
+
+    The lane's centre and width are read from its boundaries at the point's distance (at the
+    farthest fitted row beyond the bird's-eye view); without a lane, lanes of 3.7 m around us.
+    """
+    centre, width = 0.0, LANE_WIDTH_M
+    if lane is not None:
+        view = geometry.view
+        cx = view.frame_size[0] / 2
+        # The camera's axis at the point's distance, in the bird's-eye view (rows beyond the
+        # view are read at its far edge: the fits are not extrapolated).
+        row = geometry.horizon_y + geometry.k / max(distance_m, 1e-3)
+        axis = view.to_birdseye(np.array([[cx, row]]))[0]
+        bird_row = np.array([float(np.clip(axis[1], 0, view.size[1]))])
+        left = evaluate_fit(lane.left_fit, bird_row)[0]
+        right = evaluate_fit(lane.right_fit, bird_row)[0]
+        centre = ((left + right) / 2 - axis[0]) * view.xm_per_px
+        width = max((right - left) * view.xm_per_px, 2.0)
+    offset = (lateral_m - centre) / width
+    if abs(offset) <= 0.5:
+        return "ego"
+    if abs(offset) <= 1.5:
+        return "right" if offset > 0 else "left"
+    return "other"
+
+
+@dataclass(frozen=True)
+class VehicleFacts:
+    """One shown vehicle in metres: distance ahead, lateral offset, lane, closing speed."""
+
+    id: int
+    distance_m: float
+    lateral_m: float
+    lane: str
+    closing_mps: float | None
+
+
+@dataclass(frozen=True)
+class FrameFacts:
+    """The facts of one frame."""
+
+    speed_kmh: float | None
+    vehicles: tuple[VehicleFacts, ...]
+    headway_s: float | None = None  # to the nearest vehicle ahead in our lane
+    ttc_s: float | None = None  # to it, while it closes in
+
+
+class FactsTracker:
+    """History for the facts: each track's smoothed distance (for its closing speed).
+
+    Distances are smoothed along a track (exponential, weight `smoothing` on the new value) and
+    the closing speed is the slope of the smoothed distance over the last `window` frames.
+    """
+
+    def __init__(self, fps: float, smoothing: float = 0.3, window: int = 10) -> None:
+        self.fps = fps
+        self.smoothing = smoothing
+        self.window = window
+        self._distances: dict[int, deque[float]] = {}
+
+    def reset(self) -> None:
+        """Forget every track."""
+        self._distances.clear()
+
+    def update(
+        self,
+        detections: Detections | None,
+        lane: LaneEstimate | None,
+        advance_m: float | None,
+        geometry: RoadGeometry,
+    ) -> FrameFacts:
+        """The facts of one frame's shown vehicles, lane and road motion."""
+        speed = advance_m * self.fps * 3.6 if advance_m is not None and advance_m > 0 else None
+        found: list[VehicleFacts] = []
+        if detections is not None and len(detections):
+            boxes = detections.boxes
+            feet = np.column_stack([(boxes[:, 0] + boxes[:, 2]) / 2, boxes[:, 3]])
+            distances = geometry.distance(feet[:, 1])
+            laterals = geometry.lateral(feet)
+            for track_id, raw, lateral in zip(detections.ids, distances, laterals, strict=True):
+                if not math.isfinite(raw):
+                    continue
+                history = self._distances.setdefault(int(track_id), deque(maxlen=self.window))
+                smoothed = (
+                    raw
+                    if not history
+                    else self.smoothing * raw + (1 - self.smoothing) * history[-1]
+                )
+                history.append(float(smoothed))
+                closing = None
+                if len(history) >= 3 and self.fps > 0:
+                    slope = np.polyfit(np.arange(len(history)), np.asarray(history), 1)[0]
+                    closing = float(-slope * self.fps)
+                found.append(
+                    VehicleFacts(
+                        int(track_id),
+                        float(smoothed),
+                        float(lateral),
+                        lane_of(float(lateral), float(smoothed), lane, geometry),
+                        closing,
+                    )
+                )
+        shown = {f.id for f in found}
+        for gone in [i for i in self._distances if i not in shown]:
+            del self._distances[gone]
+        ahead = min((f for f in found if f.lane == "ego"), key=lambda f: f.distance_m, default=None)
+        headway = ttc = None
+        if ahead is not None:
+            if speed is not None and speed > 5:
+                headway = ahead.distance_m / (speed / 3.6)
+            if ahead.closing_mps is not None and ahead.closing_mps > 0.3:
+                ttc = ahead.distance_m / ahead.closing_mps
+        return FrameFacts(speed, tuple(found), headway, ttc)

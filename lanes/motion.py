@@ -1,0 +1,60 @@
+"""Ego motion from the road itself: how far the road surface moved between two bird's-eye frames.
+
+In the bird's-eye view the road moves straight down the image as the car drives forward, so the
+shift between consecutive views (phase correlation of their lightness) is the distance driven.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+NEAR_PART = 0.6  # the nearest 60 % of the view: road surface, rarely a vehicle
+
+
+def dft_rows(rows: int) -> int:
+    """The largest even row count up to `rows` that the DFT takes without padding: OpenCV's
+    phase correlation is half a pixel off when it pads to an odd size (measured: 7.5 for 7)."""
+    for n in range(rows - rows % 2, 1, -2):
+        if cv2.getOptimalDFTSize(n) == n:
+            return n
+    return rows
+
+
+def road_shift(
+    previous: NDArray[np.float32], current: NDArray[np.float32], min_response: float = 0.2
+) -> float | None:
+    """Rows the road moved towards the camera from `previous` to `current` (same-size grey
+    bird's-eye images), or None when the correlation peak is too weak to trust."""
+    window = cv2.createHanningWindow((current.shape[1], current.shape[0]), cv2.CV_32F)
+    (_, dy), response = cv2.phaseCorrelate(previous, current, window)
+    return float(dy) if response >= min_response else None
+
+
+class RoadMotion:
+    """History for ego motion: the previous view and the recent advances (median-smoothed)."""
+
+    def __init__(self, smoothing: int = 5, min_response: float = 0.2) -> None:
+        self.min_response = min_response
+        self.recent: deque[float] = deque(maxlen=smoothing)
+        self._previous: NDArray[np.float32] | None = None
+
+    def reset(self) -> None:
+        """Forget the previous view and the recent advances."""
+        self.recent.clear()
+        self._previous = None
+
+    def update(self, birdseye_rgb: NDArray[np.uint8], ym_per_px: float) -> float | None:
+        """Metres the car advanced since the previous frame (median of the recent measurements),
+        or None until a measurement is trusted."""
+        grey = cv2.cvtColor(birdseye_rgb, cv2.COLOR_RGB2GRAY)
+        near = np.asarray(grey[-dft_rows(round(grey.shape[0] * NEAR_PART)) :], np.float32)
+        if self._previous is not None and self._previous.shape == near.shape:
+            shift = road_shift(self._previous, near, self.min_response)
+            if shift is not None:
+                self.recent.append(shift * ym_per_px)
+        self._previous = near
+        return float(np.median(self.recent)) if self.recent else None
