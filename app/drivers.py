@@ -18,7 +18,7 @@ from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
 from app.runtime import warm_up_opencv
-from app.sinks import ImageSink, RecordSink, VideoSink
+from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
 from app.sources import prefetch, probe_video, read_frames, read_image
 from camera_cal import Calibration, fits
 from lanes.finder import LaneFinder
@@ -91,9 +91,9 @@ def process_video(
                     output,
                     info.size,
                     info.fps,
-                    audio_from=source if info.has_audio else None,
-                    audio_start_s=first / info.fps,
-                    audio_seconds=(last - first) / info.fps,
+                    AudioSpan(source, first / info.fps, (last - first) / info.fps)
+                    if info.has_audio
+                    else None,
                 )
             )
         # Without --end every decoded frame is read (the probed count is an estimate).

@@ -113,12 +113,21 @@ def container_for(path: Path) -> Container:
     return container
 
 
+@dataclass(frozen=True)
+class AudioSpan:
+    """The audio to copy into a video: `seconds` of `source`'s audio from `start_s`."""
+
+    source: Path
+    start_s: float = 0.0
+    seconds: float | None = None
+
+
 class VideoWriter:
     """Encode RGB frames through an ffmpeg pipe, in the codec the output's suffix calls for.
 
     Odd frame sizes are padded by one pixel at the right or bottom (the codecs need even sizes),
-    so coordinates stay those of the input. Audio is copied from `audio_from`, cut to the frames'
-    span and never used to end the video: every frame written is in the file.
+    so coordinates stay those of the input. Audio is copied from `audio`, cut to its span and
+    never used to end the video: every frame written is in the file.
     """
 
     def __init__(
@@ -126,9 +135,7 @@ class VideoWriter:
         path: Path,
         size: tuple[int, int],
         fps: float,
-        audio_from: Path | None = None,
-        audio_start_s: float = 0.0,
-        audio_seconds: float | None = None,
+        audio: AudioSpan | None = None,
         preset: str = "ultrafast",
     ) -> None:
         self.size = size
@@ -151,12 +158,12 @@ class VideoWriter:
             "-i",
             "-",
         ]
-        if audio_from is not None:
-            if audio_start_s > 0:
-                command += ["-ss", f"{audio_start_s:.6f}"]
-            if audio_seconds is not None:
-                command += ["-t", f"{audio_seconds:.6f}"]
-            command += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0?"]
+        if audio is not None:
+            if audio.start_s > 0:
+                command += ["-ss", f"{audio.start_s:.6f}"]
+            if audio.seconds is not None:
+                command += ["-t", f"{audio.seconds:.6f}"]
+            command += ["-i", str(audio.source), "-map", "0:v:0", "-map", "1:a:0?"]
             command += ["-c:a", container.audio]
         if width % 2 or height % 2:
             command += ["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"]
@@ -261,26 +268,19 @@ class _AtomicSink:
 
 class VideoSink(_AtomicSink):
     """`with VideoSink(path, size, fps) as sink: sink.write(frame)`: an encoded video (codec by
-    the name's suffix, audio copied from `audio_from`) that appears only if the block succeeds."""
+    the name's suffix, `audio` copied in) that appears only if the block succeeds."""
 
     def __init__(
-        self,
-        path: Path,
-        size: tuple[int, int],
-        fps: float,
-        audio_from: Path | None = None,
-        audio_start_s: float = 0.0,
-        audio_seconds: float | None = None,
+        self, path: Path, size: tuple[int, int], fps: float, audio: AudioSpan | None = None
     ) -> None:
         super().__init__(path)
         container_for(self.path)  # an impossible container is refused before any work
-        self._settings = (size, fps, audio_from, audio_start_s, audio_seconds)
+        self._settings = (size, fps, audio)
         self._writer: VideoWriter | None = None
 
     def __enter__(self) -> VideoSink:
-        size, fps, audio_from, audio_start_s, audio_seconds = self._settings
-        tmp = self._open()
-        self._writer = VideoWriter(tmp, size, fps, audio_from, audio_start_s, audio_seconds)
+        size, fps, audio = self._settings
+        self._writer = VideoWriter(self._open(), size, fps, audio)
         return self
 
     def write(self, frame: Frame) -> None:
