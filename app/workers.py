@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import mmap
 import multiprocessing
+import pickle
 import signal
 import time
 from multiprocessing.connection import Connection
@@ -39,6 +40,7 @@ def _serve(
             command, argument = conn.recv()
         except (EOFError, OSError):
             return
+        reply: tuple[str, Any]
         try:
             if command == "frame":
                 slot, shape = argument
@@ -47,17 +49,22 @@ def _serve(
                 frame = frame.copy()
                 t0 = time.perf_counter()
                 result = stage.process(frame)
-                conn.send(("ok", (result, (time.perf_counter() - t0) * 1000)))
+                reply = ("ok", (result, (time.perf_counter() - t0) * 1000))
             elif command == "reset":
                 stage.reset()
-                conn.send(("ok", None))
+                reply = ("ok", None)
             else:
                 return
         except Exception as error:  # handed to the parent, which raises it
+            reply = ("error", error)
+        try:
             try:
-                conn.send(("error", error))
-            except Exception:  # the error itself does not pickle
-                conn.send(("error", WorkerError(f"{type(error).__name__}: {error}")))
+                conn.send(reply)
+            except (TypeError, AttributeError, pickle.PicklingError):  # an error that won't pickle
+                failure = reply[1]
+                conn.send(("error", WorkerError(f"{type(failure).__name__}: {failure}")))
+        except (BrokenPipeError, ConnectionError, EOFError, OSError):
+            return  # the parent stopped listening (Ctrl-C, or it died): nothing to answer
 
 
 class StageWorker:
