@@ -191,11 +191,38 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         default_annotators(),
         vehicles_in_worker=False,
     )
+    # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]
     write_table_parts(options.out / TABLE, _key(entry), str(entry.relative), rows)
-    span = rows[-1]["time_s"] - rows[0]["time_s"] if len(rows) > 1 else 0.0
-    fps = (len(rows) - 1) / span if span > 0 else 25.0
-    return summary.frames, summary.frames / fps
+    return summary.frames, summary.video_seconds
+
+
+def _schema(*columns: tuple[str, str]) -> Any:
+    import pyarrow as pa
+
+    return pa.schema([(name, pa.type_for_alias(kind)) for name, kind in columns])
+
+
+# The queryable tables: one row per frame, and one per shown vehicle in a frame.
+FRAME_COLUMNS = (
+    ("video", "string"),
+    ("frame", "int64"),
+    ("time_s", "double"),
+    ("lane_found", "bool"),
+    ("curvature_m", "double"),
+    ("offset_m", "double"),
+    ("vehicles", "int64"),
+)
+VEHICLE_COLUMNS = (
+    ("video", "string"),
+    ("frame", "int64"),
+    ("id", "int64"),
+    ("x1", "double"),
+    ("y1", "double"),
+    ("x2", "double"),
+    ("y2", "double"),
+    ("score", "double"),
+)
 
 
 def write_table_parts(table: Path, key: str, video: str, rows: list[dict[str, Any]]) -> None:
@@ -203,56 +230,30 @@ def write_table_parts(table: Path, key: str, video: str, rows: list[dict[str, An
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    frames = pa.table(
+    frames = [
         {
-            "video": [video] * len(rows),
-            "frame": [r["frame"] for r in rows],
-            "time_s": [r["time_s"] for r in rows],
-            "lane_found": [r.get("lane") is not None for r in rows],
-            "curvature_m": [(r.get("lane") or {}).get("curvature_m") for r in rows],
-            "offset_m": [(r.get("lane") or {}).get("offset_m") for r in rows],
-            "vehicles": [len(r.get("vehicles", [])) for r in rows],
-        },
-        schema=pa.schema(
-            [
-                ("video", pa.string()),
-                ("frame", pa.int64()),
-                ("time_s", pa.float64()),
-                ("lane_found", pa.bool_()),
-                ("curvature_m", pa.float64()),
-                ("offset_m", pa.float64()),
-                ("vehicles", pa.int64()),
-            ]
-        ),
-    )
-    found = [(r["frame"], v) for r in rows for v in r.get("vehicles", [])]
-    vehicles = pa.table(
-        {
-            "video": [video] * len(found),
-            "frame": [f for f, _ in found],
-            "id": [v["id"] for _, v in found],
-            "x1": [v["box"][0] for _, v in found],
-            "y1": [v["box"][1] for _, v in found],
-            "x2": [v["box"][2] for _, v in found],
-            "y2": [v["box"][3] for _, v in found],
-            "score": [v["score"] for _, v in found],
-        },
-        schema=pa.schema(
-            [
-                ("video", pa.string()),
-                ("frame", pa.int64()),
-                ("id", pa.int64()),
-                ("x1", pa.float64()),
-                ("y1", pa.float64()),
-                ("x2", pa.float64()),
-                ("y2", pa.float64()),
-                ("score", pa.float64()),
-            ]
-        ),
-    )
-    for name, data in (("frames", frames), ("vehicles", vehicles)):
+            "video": video,
+            "frame": r["frame"],
+            "time_s": r["time_s"],
+            "lane_found": r.get("lane") is not None,
+            "curvature_m": (r.get("lane") or {}).get("curvature_m"),
+            "offset_m": (r.get("lane") or {}).get("offset_m"),
+            "vehicles": len(r.get("vehicles", [])),
+        }
+        for r in rows
+    ]
+    vehicles = [
+        {"video": video, "frame": r["frame"], "id": v["id"], "score": v["score"]}
+        | dict(zip(("x1", "y1", "x2", "y2"), v["box"], strict=True))
+        for r in rows
+        for v in r.get("vehicles", [])
+    ]
+    for name, data, columns in (
+        ("frames", frames, FRAME_COLUMNS),
+        ("vehicles", vehicles, VEHICLE_COLUMNS),
+    ):
         with atomic_output(table / name / f"{key}.parquet") as tmp:
-            pq.write_table(data, tmp)
+            pq.write_table(pa.Table.from_pylist(data, schema=_schema(*columns)), tmp)
 
 
 def read_manifest(table: Path) -> dict[str, ManifestRow]:
@@ -435,10 +436,10 @@ class BatchProgress:
         self.bar.close()
 
 
-def iter_rows(summary: BatchSummary) -> Iterator[str]:
-    """The closing summary, line by line."""
+def summary_line(summary: BatchSummary) -> str:
+    """The closing summary: counts, hours of video, throughput."""
     rate = summary.frames / summary.wall_seconds if summary.wall_seconds > 0 else 0.0
-    yield (
+    return (
         f"videos: {summary.done} done, {summary.failed} failed, {summary.skipped} skipped; "
         f"{summary.video_seconds / 3600:.3f} h of video in {summary.wall_seconds:.1f} s "
         f"({rate:.1f} frames/s)"

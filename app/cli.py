@@ -178,7 +178,7 @@ def batch_command(
     model: ModelOption = None,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
-    from app.batch import BatchOptions, find_inputs, iter_rows, run_batch
+    from app.batch import BatchOptions, find_inputs, run_batch, summary_line
 
     entries = find_inputs(inputs)
     if not entries:
@@ -193,8 +193,7 @@ def batch_command(
     summary = run_batch(
         entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
     )
-    for line in iter_rows(summary):
-        typer.echo(line)
+    typer.echo(summary_line(summary))
     if summary.failed:
         raise typer.Exit(1)
 

@@ -30,9 +30,10 @@ class RunSummary:
     """What a processing run did."""
 
     frames: int
-    seconds: float
+    seconds: float  # wall time of the run
     output: Path | None
     record: Path | None
+    video_seconds: float = 0.0  # length of the video processed (0 for a still)
 
     @property
     def fps(self) -> float:
@@ -113,7 +114,7 @@ def process_video(
                 f"{source} is truncated or damaged: decoded {count} of {expected} frames; "
                 "re-export or re-download the video"
             )
-    return RunSummary(count, time.perf_counter() - started, output, record)
+    return RunSummary(count, time.perf_counter() - started, output, record, count / info.fps)
 
 
 def process_still(

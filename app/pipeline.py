@@ -94,7 +94,8 @@ class Pipeline:
             build_undistorter(self.calibration, size) if self.calibration is not None else None
         )
         self.size = size
-        view = birdseye_for(size, self.lanes.config if self.lanes is not None else LaneConfig())
+        # The lane stage's own warp for this size (built once), or the default one without it.
+        view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         self._facts = FactsTracker(fps)
         frame_bytes = size[0] * size[1] * 3
