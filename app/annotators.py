@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from app.events import Event
 from app.pipeline import FrameResult
 from lanes.finder import LaneEstimate, LaneResult
 from vehicles.detections import Detections
@@ -28,6 +29,7 @@ LANE_EDGE = (255, 230, 0)
 BOX = (255, 60, 60)
 TEXT = (255, 255, 255)
 PANEL = (20, 20, 20)
+BANNER = (220, 30, 30)
 
 
 def _scale(frame: Frame) -> float:
@@ -128,6 +130,32 @@ def draw_panel(frame: Frame, lines: list[str]) -> None:
             thick,
             cv2.LINE_AA,
         )
+
+
+def draw_banner(frame: Frame, lines: list[str]) -> None:
+    """A red banner across the top centre with one line per event under way."""
+    if not lines:
+        return
+    s = _scale(frame)
+    font, size, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.9 * s, max(1, round(2 * s))
+    line_h = round(38 * s)
+    width = max(cv2.getTextSize(t, font, size, thick)[0][0] for t in lines) + round(40 * s)
+    x0 = max((frame.shape[1] - width) // 2, 0)
+    roi = frame[: line_h * len(lines) + round(14 * s), x0 : x0 + width]
+    roi[:] = (roi * 0.25 + np.array(BANNER) * 0.75).astype(np.uint8)
+    for i, text in enumerate(lines):
+        cv2.putText(
+            frame, text, (x0 + round(20 * s), round((i + 1) * line_h)), font, size, TEXT, thick,
+            cv2.LINE_AA,
+        )  # fmt: skip
+
+
+def banner_lines(events: Sequence[Event]) -> list[str]:
+    """The banner's text: each event under way in capitals, with its vehicle's id."""
+    return [
+        e.title.upper() + (f"  #{e.vehicle_id}" if e.vehicle_id is not None else "")
+        for e in events
+    ]
 
 
 def draw_insets(frame: Frame, insets: list[NDArray[np.uint8]]) -> None:
@@ -237,6 +265,16 @@ class PanelAnnotator:
 
 
 @dataclass(frozen=True)
+class BannerAnnotator:
+    """A banner while a driving event (lane departure, close following, ...) is under way."""
+
+    def annotate(self, scene: Frame, result: FrameResult) -> Frame:
+        """Draw the banner when an event is under way."""
+        draw_banner(scene, banner_lines(result.events))
+        return scene
+
+
+@dataclass(frozen=True)
 class InsetAnnotator:
     """The bird's-eye lane fit and the vehicle heat history, small at the top right."""
 
@@ -252,8 +290,8 @@ class InsetAnnotator:
 
 
 def default_annotators(insets: bool = False) -> list[Annotator]:
-    """What `process` and `batch` draw: lane, boxes, panel (and insets)."""
-    chain: list[Annotator] = [LaneAnnotator(), BoxAnnotator(), PanelAnnotator()]
+    """What `process` and `batch` draw: lane, boxes, panel, event banner (and insets)."""
+    chain: list[Annotator] = [LaneAnnotator(), BoxAnnotator(), PanelAnnotator(), BannerAnnotator()]
     if insets:
         chain.append(InsetAnnotator())
     return chain

@@ -120,6 +120,12 @@ def process_command(
     record: Annotated[
         Path | None, typer.Option("--json", help="Per-frame JSON-lines record.")
     ] = None,
+    events: Annotated[
+        Path | None,
+        typer.Option(
+            "--events", help="Driving events (lane departure, close following, ...) as JSON lines."
+        ),
+    ] = None,
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
     start: Annotated[float, typer.Option(help="Start time in seconds.")] = 0.0,
     end: Annotated[float | None, typer.Option(help="End time in seconds.")] = None,
@@ -138,7 +144,7 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
-    outputs = plan_outputs(source, output, record, log=lambda m: typer.echo(m, err=True))
+    outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
     cal = _calibration(calibration)
     still = is_image(source)
@@ -150,11 +156,18 @@ def process_command(
         )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
-        summary = process_video(source, output, cal, *stages, record, annotators, start, end)
+        summary = process_video(
+            source, output, cal, *stages, record, annotators, start, end, events_file=events
+        )
+    written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
         f"wrote {summary.output} ({summary.frames} frames, {summary.fps:.1f} fps)"
-        + (f" and {summary.record}" if summary.record else "")
+        + (f" and {' and '.join(written)}" if written else "")
     )
+    if not still:
+        typer.echo(f"events: {len(summary.events) or 'none'}")
+        for event in summary.events:
+            typer.echo(f"  {event.describe()}")
 
 
 @cli.command("batch")

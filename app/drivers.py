@@ -14,6 +14,7 @@ from pathlib import Path
 
 from app.annotators import Annotator, compose
 from app.errors import InputError
+from app.events import Event, event_record
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
@@ -34,6 +35,8 @@ class RunSummary:
     output: Path | None
     record: Path | None
     video_seconds: float = 0.0  # length of the video processed (0 for a still)
+    events: tuple[Event, ...] = ()  # driving events found, by start time
+    events_file: Path | None = None
 
     @property
     def fps(self) -> float:
@@ -63,8 +66,10 @@ def process_video(
     start_s: float = 0.0,
     end_s: float | None = None,
     vehicles_in_worker: bool = True,
+    events_file: Path | None = None,
 ) -> RunSummary:
-    """Process a video into an annotated video and/or a record; outputs appear only on success.
+    """Process a video into an annotated video, a record and/or an events file; outputs appear
+    only on success.
 
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
@@ -83,7 +88,7 @@ def process_video(
         Pipeline(calibration, lanes, vehicles, vehicles_in_worker) as pipeline,
         ExitStack() as sinks,
     ):
-        pipeline.prepare(info.size, info.fps)
+        pipeline.prepare(info.size, info.fps, first)
         records = sinks.enter_context(RecordSink(record)) if record is not None else None
         video = None
         if output is not None:
@@ -114,7 +119,20 @@ def process_video(
                 f"{source} is truncated or damaged: decoded {count} of {expected} frames; "
                 "re-export or re-download the video"
             )
-    return RunSummary(count, time.perf_counter() - started, output, record, count / info.fps)
+        events = tuple(pipeline.finish_events())
+        if events_file is not None:
+            event_sink = sinks.enter_context(RecordSink(events_file))
+            for event in events:
+                event_sink.write(event_record(event))
+    return RunSummary(
+        count,
+        time.perf_counter() - started,
+        output,
+        record,
+        count / info.fps,
+        events,
+        events_file,
+    )
 
 
 def process_still(

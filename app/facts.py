@@ -111,6 +111,7 @@ class FrameFacts:
     vehicles: tuple[VehicleFacts, ...]
     headway_s: float | None = None  # to the nearest vehicle ahead in our lane
     ttc_s: float | None = None  # to it, while it closes in
+    ahead_id: int | None = None  # that vehicle
 
 
 class FactsTracker:
@@ -178,4 +179,6 @@ class FactsTracker:
                 headway = ahead.distance_m / (speed / 3.6)
             if ahead.closing_mps is not None and ahead.closing_mps > 0.3:
                 ttc = ahead.distance_m / ahead.closing_mps
-        return FrameFacts(speed, tuple(found), headway, ttc)
+        return FrameFacts(
+            speed, tuple(found), headway, ttc, ahead.id if ahead is not None else None
+        )

@@ -22,6 +22,7 @@ class Outputs:
 
     media: Path
     record: Path | None
+    events: Path | None = None
 
 
 def _same_path(a: Path, b: Path) -> bool:
@@ -61,8 +62,10 @@ def plan_outputs(
     output: Path | None,
     record: Path | None,
     log: Callable[[str], None] = lambda message: None,
+    events: Path | None = None,
 ) -> Outputs:
-    """The output files of `process SOURCE [-o OUTPUT] [--json RECORD]`, or an InputError.
+    """The output files of `process SOURCE [-o OUTPUT] [--json RECORD] [--events EVENTS]`, or an
+    InputError.
 
     `-o` naming an existing folder puts the default name inside it.
     """
@@ -96,7 +99,14 @@ def plan_outputs(
             raise InputError(f"--json {record} is the input; choose another record name")
         if _same_path(record, output):
             raise InputError(f"--json {record} is also the -o output; give them different names")
-    return Outputs(output, record)
+    if events is not None:
+        if still:
+            raise InputError("--events needs a video (events take time); drop it for a still")
+        _check_writable_target(events, "events file", "--events")
+        for other, option in ((source, "the input"), (output, "the -o output"), (record, "--json")):
+            if other is not None and _same_path(events, other):
+                raise InputError(f"--events {events} is also {option}; give it another name")
+    return Outputs(output, record, events)
 
 
 def check_debug_folder(folder: Path, source: Path) -> None:

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 from app.errors import FrameSizeChanged
+from app.events import Event, EventDetector, FrameSignals
 from app.facts import FactsTracker, FrameFacts, RoadGeometry
 from app.sources import Frame
 from app.stages import FrameStage
@@ -31,6 +32,7 @@ class FrameResult:
     lane: LaneResult | None = None
     vehicles: VehicleResult | None = None
     facts: FrameFacts | None = None
+    events: tuple[Event, ...] = ()  # the driving events under way at this frame
     timings_ms: dict[str, float] = field(default_factory=dict)
 
 
@@ -67,6 +69,9 @@ class Pipeline:
         self._worker: StageWorker | None = None
         self._geometry: RoadGeometry | None = None
         self._facts: FactsTracker | None = None
+        self._events = EventDetector()
+        self._fps = 0.0
+        self._frame = 0  # index of the next frame to finish
 
     def __enter__(self) -> Pipeline:
         return self
@@ -84,9 +89,9 @@ class Pipeline:
     def _stages(self) -> list[FrameStage]:
         return [s for s in (self.lanes, self.vehicles) if s is not None]
 
-    def prepare(self, size: tuple[int, int], fps: float = 0.0) -> None:
-        """Get ready for a clip of frames of `size` (width, height) at `fps` (0 for a still):
-        maps, road geometry, fresh history, worker.
+    def prepare(self, size: tuple[int, int], fps: float = 0.0, first_frame: int = 0) -> None:
+        """Get ready for a clip of frames of `size` (width, height) at `fps` (0 for a still),
+        starting at frame index `first_frame`: maps, road geometry, fresh history, worker.
 
         Raises `camera_cal.CalibrationMismatch` when the calibration does not fit the size.
         """
@@ -98,6 +103,8 @@ class Pipeline:
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         self._facts = FactsTracker(fps)
+        self._events.reset()
+        self._fps, self._frame = fps, first_frame
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:
             self.close()  # a larger frame than the slots hold: start the worker again
@@ -108,6 +115,10 @@ class Pipeline:
         elif self.vehicles_in_worker and self.vehicles is not None:
             # Forked now, before any reader/writer thread exists, with fresh stage history.
             self._worker = StageWorker(self.vehicles, frame_bytes)
+
+    def finish_events(self) -> list[Event]:
+        """End of the clip: every driving event found in it, by start time."""
+        return self._events.finish()
 
     def undistort(self, frame: Frame) -> Frame:
         """The undistorted frame (or the frame itself without a calibration)."""
@@ -168,4 +179,19 @@ class Pipeline:
                 lane.advance_m if lane is not None else None,
                 self._geometry,
             )
-        return FrameOutput(undistorted, FrameResult(lane, vehicles, facts, timings))
+        events: tuple[Event, ...] = ()
+        if self._fps > 0:  # events need time: not for a still
+            estimate = lane.lane if lane is not None else None
+            events = self._events.update(
+                FrameSignals(
+                    self._frame,
+                    self._frame / self._fps,
+                    estimate.offset_m if estimate is not None else None,
+                    estimate.width_m if estimate is not None else None,
+                    facts.headway_s if facts is not None else None,
+                    facts.ttc_s if facts is not None else None,
+                    facts.ahead_id if facts is not None else None,
+                )
+            )
+        self._frame += 1
+        return FrameOutput(undistorted, FrameResult(lane, vehicles, facts, events, timings))

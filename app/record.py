@@ -22,7 +22,8 @@ from vehicles.detections import Detections
 
 
 def lane_record(lane: LaneEstimate | None) -> dict[str, Any] | None:
-    """The `lane` field: boundaries as [x, y] points, radius (null when straight), offset."""
+    """The `lane` field: boundaries as [x, y] points, radius (null when straight), offset and
+    width."""
     if lane is None:
         return None
     return {
@@ -30,6 +31,7 @@ def lane_record(lane: LaneEstimate | None) -> dict[str, Any] | None:
         "right": np.round(lane.right, 1).tolist(),
         "curvature_m": round(lane.curvature_m, 1) if math.isfinite(lane.curvature_m) else None,
         "offset_m": round(lane.offset_m, 3),
+        "width_m": round(lane.width_m, 2) if math.isfinite(lane.width_m) else None,
     }
 
 

@@ -38,6 +38,7 @@ class LaneEstimate:
     offset_m: float
     left_fit: Fit  # bird's-eye fits, x = a y^2 + b y + c
     right_fit: Fit
+    width_m: float = math.nan  # between the boundaries at the bottom row
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,4 +210,5 @@ class LaneFinder:
         radius = 1.0 / curvature if curvature * cfg.straight_radius_m > 1.0 else math.inf
         centre_px = float(view.to_birdseye(np.array([[w / 2, cfg.src_bottom_y * h]]))[0, 0])
         offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
-        return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right)
+        width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
+        return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right, width)

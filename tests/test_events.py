@@ -1,0 +1,165 @@
+"""Driving events with hysteresis, on synthetic series of facts and on the shared clips."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.annotators import BANNER, compose, default_annotators
+from app.events import (
+    Event,
+    FrameSignals,
+    event_from_record,
+    event_record,
+    find_events,
+    signals_from_record,
+)
+from app.pipeline import FrameResult
+from tests.helpers import process_clip, run_cli
+
+FPS = 25.0
+
+
+def _series(
+    offsets: Sequence[float | None] | None = None,
+    headways: Sequence[float | None] | None = None,
+    ttcs: Sequence[float | None] | None = None,
+    ahead: int | None = 7,
+) -> list[FrameSignals]:
+    n = max(len(x) for x in (offsets, headways, ttcs) if x is not None)
+    return [
+        FrameSignals(
+            k,
+            k / FPS,
+            offsets[k] if offsets is not None else 0.0,
+            3.7,
+            headways[k] if headways is not None else None,
+            ttcs[k] if ttcs is not None else None,
+            ahead,
+        )
+        for k in range(n)
+    ]
+
+
+def _ramp(*pieces: tuple[float, float, float]) -> list[float]:
+    """Joined linear pieces (from, to, seconds) at FPS."""
+    out: list[float] = []
+    for a, b, seconds in pieces:
+        out += list(np.linspace(a, b, round(seconds * FPS)))
+    return out
+
+
+def test_a_drift_over_the_line_and_back_is_one_departure() -> None:
+    # The wheel touches the line at |offset| (3.7 - 1.8) / 2 = 0.95 m.
+    offsets = _ramp((0.0, 1.3, 1.0), (1.3, 1.3, 1.0), (1.3, 0.0, 1.0), (0.0, 0.0, 2.0))
+    events = find_events(_series(offsets))
+    assert [e.kind for e in events] == ["lane_departure"]
+    (e,) = events
+    # Over 0.95 m from 0.73 s; back inside by the 0.15 m margin (0.8 m) at 2.38 s.
+    assert 0.6 < e.start_s < 0.8 and 2.3 < e.end_s < 2.5
+    assert e.worst == pytest.approx(1.3, abs=0.01) and e.vehicle_id is None
+
+
+def test_a_brief_touch_and_a_wobble_on_the_line_are_no_flicker() -> None:
+    touch = _ramp((0.0, 0.0, 1.0), (1.0, 1.0, 0.12), (0.0, 0.0, 1.0))
+    assert find_events(_series(touch)) == []
+    # Wobbling either side of the line for 2 s: one departure, not one per crossing.
+    wobble = [0.0] * 25 + [0.9 + 0.1 * (-1) ** k for k in range(50)] + [0.0] * 25
+    assert [e.kind for e in find_events(_series(wobble))] == ["lane_departure"]
+
+
+@pytest.mark.parametrize(("side", "kind"), [(1.0, "lane_change_right"), (-1.0, "lane_change_left")])
+def test_a_jump_across_the_centre_is_a_lane_change(side: float, kind: str) -> None:
+    # Drift to the line, the finder re-locks on the next lane (offset jumps across) with a few
+    # frames of no lane between, then we settle in the middle of the new lane.
+    offsets: list[float | None] = [side * v for v in _ramp((0.0, 1.8, 1.5))]
+    offsets += [None] * 5 + [-side * v for v in _ramp((1.7, 0.0, 1.5), (0.0, 0.0, 1.0))]
+    (e,) = find_events(_series(offsets))
+    assert e.kind == kind
+    assert 0.7 < e.start_s < 0.9 and 2.0 < e.end_s < 2.6
+
+
+def test_lane_lost_for_long_ends_an_excursion_where_it_was_last_seen() -> None:
+    offsets: list[float | None] = [*_ramp((0.0, 1.2, 1.0), (1.2, 1.2, 1.0)), *[None] * 100]
+    (e,) = find_events(_series(offsets))
+    assert e.kind == "lane_departure" and e.end_frame == 49
+
+
+def test_close_following_needs_over_two_seconds_under_one_second() -> None:
+    short = [2.0] * 10 + [0.8] * 40 + [2.0] * 10  # 1.6 s under 1.0 s
+    assert find_events(_series(headways=short)) == []
+    # 3 s under, with a blip to 1.1 s (under the 1.2 s exit) and missing values (the vehicle
+    # hidden for a few frames): one event from the first frame under to the last.
+    long: list[float | None] = [2.0] * 10 + [0.9] * 30 + [1.1] * 5 + [None] * 5 + [0.7] * 35
+    long += [1.5] * 30
+    (e,) = find_events(_series(headways=long))
+    assert (e.kind, e.vehicle_id, e.start_frame, e.end_frame) == ("close_following", 7, 10, 84)
+    assert e.worst == pytest.approx(0.7)
+
+
+def test_a_headway_hovering_at_one_second_is_one_event() -> None:
+    hover = [0.95 if k % 2 else 1.05 for k in range(100)]
+    (e,) = find_events(_series(headways=hover))
+    assert e.start_frame == 1 and e.end_frame == 99
+
+
+def test_closing_fast_and_a_new_vehicle_ahead() -> None:
+    ttcs: list[float | None] = [None] * 10 + [2.5] * 10 + [6.0] * 30
+    (e,) = find_events(_series(ttcs=ttcs))
+    assert e.kind == "closing_fast" and e.start_frame == 10 and e.end_frame == 19
+    too_short = [None] * 10 + [2.5] * 5 + [6.0] * 30  # 0.16 s
+    assert find_events(_series(ttcs=too_short)) == []
+    # Close to one car, then to another: two events, each with its vehicle.
+    frames = _series(headways=[0.8] * 60) + [
+        FrameSignals(60 + k, (60 + k) / FPS, 0.0, 3.7, 0.8, None, 9) for k in range(60)
+    ]
+    assert [(e.kind, e.vehicle_id) for e in find_events(frames)] == [
+        ("close_following", 7),
+        ("close_following", 9),
+    ]
+
+
+def test_events_round_trip_and_signals_from_a_record_line() -> None:
+    event = Event("close_following", 10, 84, 0.4, 3.36, 7, 0.7)
+    assert event_from_record(json.loads(json.dumps(event_record(event)))) == event
+    row = {
+        "frame": 3,
+        "time_s": 0.12,
+        "lane": {"offset_m": 0.4, "width_m": 3.5},
+        "headway_s": 0.9,
+        "ttc_s": None,
+        "vehicles": [
+            {"id": 4, "lane": "ego", "distance_m": 30.0},
+            {"id": 5, "lane": "ego", "distance_m": 20.0},
+            {"id": 6, "lane": "left", "distance_m": 10.0},
+        ],
+    }
+    assert signals_from_record(row) == FrameSignals(3, 0.12, 0.4, 3.5, 0.9, None, 5)
+
+
+def test_the_banner_shows_events_under_way() -> None:
+    frame = np.full((720, 1280, 3), 90, np.uint8)
+    event = Event("close_following", 0, 60, 0.0, 2.4, 7, 0.8)
+    quiet = compose(frame, FrameResult(), default_annotators())
+    shown = compose(frame, FrameResult(events=(event,)), default_annotators())
+    top = shown[5:40, 560:720].reshape(-1, 3).astype(int)
+    red = np.abs(top - np.array(BANNER) * 0.75 - 90 * 0.25).sum(axis=1) < 30
+    assert red.mean() > 0.5 and np.array_equal(quiet[5:40, 560:720], frame[5:40, 560:720])
+
+
+@pytest.mark.slow
+def test_no_events_on_the_shared_clips(data_dir: Path, tmp_path: Path) -> None:
+    """The car keeps its lane and follows nobody closely in the three clips: no event, in the
+    record's facts nor in the --events file of the run."""
+    for clip in ("project_cut_1", "project_cut_2"):
+        records = process_clip(data_dir / "videos" / f"{clip}.mp4", tmp_path)
+        assert find_events(signals_from_record(r) for r in records) == [], clip
+    events = tmp_path / "events.jsonl"
+    video = data_dir / "videos" / "test_video.mp4"
+    done = run_cli("process", str(video), "-o", str(tmp_path / "o.mp4"), "--events", str(events))
+    assert done.returncode == 0, done.stderr
+    assert events.read_text() == "" and "events: none" in done.stdout
