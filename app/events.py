@@ -192,9 +192,8 @@ class _Excursion:
         kind = "lane_departure"
         if self._changed:
             kind = "lane_change_right" if self._side > 0 else "lane_change_left"
-        return Event(
-            kind, start.frame, end.frame, start.time_s, end.time_s, None, round(float(self._worst), 3)
-        )
+        worst = round(float(self._worst), 3)
+        return Event(kind, start.frame, end.frame, start.time_s, end.time_s, None, worst)
 
     @property
     def active(self) -> Event | None:
