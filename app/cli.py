@@ -258,6 +258,56 @@ def evaluate_command(
     typer.echo(json.dumps(scores) if as_json else format_report(scores))
 
 
+@cli.command("report")
+def report_command(
+    record: Annotated[
+        Path, typer.Argument(metavar="RECORD", help="Record written by 'process --json'.")
+    ],
+    output: Annotated[
+        Path | None,
+        typer.Option("-o", "--output", help="HTML page to write (default: RECORD_report.html)."),
+    ] = None,
+    events: Annotated[
+        Path | None,
+        typer.Option(help="Events written by 'process --events' (default: found from the record)."),
+    ] = None,
+    video: Annotated[
+        Path | None,
+        typer.Option(help="The video the record was made from, for a thumbnail per event."),
+    ] = None,
+    calibration: CalibrationOption = DEFAULT_CALIBRATION,
+) -> None:
+    """Write a self-contained HTML report: plots over time and the events with thumbnails."""
+    from app.events import find_events, signals_from_record
+    from app.outputs import check_report_output
+    from app.record import read_record
+    from app.report import event_thumbnails, read_events, report_html
+    from app.sinks import atomic_output
+
+    output = output if output is not None else record.with_name(f"{record.stem}_report.html")
+    check_report_output(output, [p for p in (record, events, video) if p is not None])
+    rows = list(read_record(record))
+    if not rows:
+        raise InputError(f"record {record} has no frames; make one with 'roadview process --json'")
+    if events is not None:
+        found, source = read_events(events), f"from {events.name}"
+    else:
+        found = find_events(signals_from_record(r) for r in rows)
+        source = f"found from {record.name}"
+    thumbnails = {}
+    if video is not None:
+        thumbnails = event_thumbnails(video, rows, found, _calibration(calibration))
+    elif found:
+        typer.echo("note: no --video given; the events have no thumbnails", err=True)
+    page = report_html(f"roadview report: {record.name}", rows, found, thumbnails, source)
+    try:
+        with atomic_output(output) as tmp:
+            tmp.write_text(page)
+    except OSError as error:
+        raise InputError(f"cannot write {output} ({error.strerror}); choose another -o") from None
+    typer.echo(f"wrote {output} ({len(rows)} frames, {len(found)} events)")
+
+
 @cli.command("train")
 def train_command(
     data: Annotated[

@@ -116,3 +116,13 @@ def check_debug_folder(folder: Path, source: Path) -> None:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--out {folder} is a file; choose a folder name")
     _check_writable_target(folder / "index.html", "debug folder", "--out")
+
+
+def check_report_output(output: Path, inputs: list[Path]) -> None:
+    """The report's page must be an .html file that is none of its inputs."""
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise InputError(f"report {output} is not an .html name; pass one with -o")
+    _check_writable_target(output, "report", "-o")
+    for path in inputs:
+        if _same_path(output, path):
+            raise InputError(f"report {output} is also the input {path}; choose another -o")

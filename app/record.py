@@ -78,13 +78,16 @@ def frame_record(
     return record
 
 
-def read_record(path: Path) -> Iterator[dict[str, Any]]:
-    """Frame objects of a record file, with a clear error on a malformed line."""
+def read_record_lines(path: Path, what: str = "record") -> Iterator[tuple[int, dict[str, Any]]]:
+    """(line number, object) of each line of a JSON-lines file written by roadview, with a clear
+    error on a missing file or a malformed line; `what` names the file in the error."""
+    option = "--events" if "events" in what else "--json"
     try:
         lines = Path(path).read_text().splitlines()
-    except OSError as error:
+    except (OSError, UnicodeDecodeError) as error:
+        reason = error.strerror if isinstance(error, OSError) else "not text"
         raise InputError(
-            f"cannot read record {path} ({error.strerror}); make one with 'roadview process --json'"
+            f"cannot read {what} {path} ({reason}); make one with 'roadview process {option}'"
         ) from None
     for number, line in enumerate(lines, start=1):
         if not line.strip():
@@ -93,9 +96,17 @@ def read_record(path: Path) -> Iterator[dict[str, Any]]:
             obj = json.loads(line)
         except json.JSONDecodeError:
             raise InputError(
-                f"{path}:{number} is not a JSON line; pass a record "
-                "written by 'roadview process --json'"
+                f"{path}:{number} is not a JSON line; pass a {what} "
+                f"written by 'roadview process {option}'"
             ) from None
-        if not isinstance(obj, dict) or "frame" not in obj:
+        if not isinstance(obj, dict):
+            raise InputError(f"{path}:{number} is not a JSON object; not a roadview {what}")
+        yield number, obj
+
+
+def read_record(path: Path) -> Iterator[dict[str, Any]]:
+    """Frame objects of a record file, with a clear error on a malformed line."""
+    for number, obj in read_record_lines(path):
+        if "frame" not in obj or "time_s" not in obj:
             raise InputError(f"{path}:{number} has no 'frame' field; not a roadview record")
         yield obj

@@ -1,0 +1,165 @@
+"""`roadview report`: a self-contained page of plots and events, checked in headless Chromium."""
+
+from __future__ import annotations
+
+import html.parser
+import json
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from app.events import Event, event_record
+from app.report import record_series, report_html, svg_plot
+from tests.helpers import assert_one_line_error, process_clip, run_cli
+
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--virtual-time-budget=5000",
+]
+
+
+def _chromium() -> str:
+    """Debian's Chromium (CI installs it and sets ROADVIEW_REQUIRE_BROWSER; elsewhere the
+    browser test is skipped when there is none)."""
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
+    if found is None:
+        if os.environ.get("ROADVIEW_REQUIRE_BROWSER"):
+            pytest.fail("ROADVIEW_REQUIRE_BROWSER is set but no chromium is installed")
+        pytest.skip("no chromium: apt-get install chromium to run the browser test")
+    return found
+
+
+def _rows(n: int = 50) -> list[dict[str, Any]]:
+    """A synthetic record: speed known after frame 5, the lane lost in frames 20-24, a car
+    ahead closing from 30 m in frames 10-39."""
+    rows = []
+    for k in range(n):
+        row: dict[str, Any] = {"frame": k, "time_s": k / 25, "size": [640, 360]}
+        row["speed_kmh"] = 90.0 if k >= 5 else None
+        row["lane"] = (
+            None
+            if 20 <= k < 25
+            else {"left": [], "right": [], "curvature_m": None, "offset_m": 0.1, "width_m": 3.6}
+        )
+        row["vehicles"] = (
+            [{"id": 3, "box": [300, 200, 340, 230], "lane": "ego", "distance_m": 30.0 - k / 5}]
+            if 10 <= k < 40
+            else []
+        )
+        rows.append(row)
+    return rows
+
+
+def test_plots_follow_the_record_with_gaps_where_nothing_was_measured() -> None:
+    times, series = record_series(_rows())
+    assert [s.key for s in series] == ["speed", "offset", "curvature", "distance", "vehicles"]
+    by_key = {s.key: s for s in series}
+    assert np.isnan(by_key["speed"].values[:5]).all() and (by_key["speed"].values[5:] == 90).all()
+    assert np.isnan(by_key["offset"].values[20:25]).all()
+    assert (by_key["curvature"].values[:20] == 0).all()  # a null radius: straight
+    # The lane is lost once: the offset is drawn as two lines; the distance as one.
+    assert svg_plot(times, by_key["offset"]).count("<polyline") == 2
+    assert svg_plot(times, by_key["distance"]).count("<polyline") == 1
+    no_lane = [{k: v for k, v in r.items() if k != "lane"} for r in _rows()]
+    assert "offset" not in {s.key for s in record_series(no_lane)[1]}
+    event = Event("close_following", 10, 39, 0.4, 1.56, 3, 0.9)
+    page = report_html("t", _rows(), [event], {}, "test")
+    assert page.count('class="span"') == 5  # the event shaded on every plot
+    assert "close following" in page and "no video given" in page
+
+
+class _Resources(html.parser.HTMLParser):
+    """Every src/href of a page."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.links: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self.links += [v or "" for k, v in attrs if k in ("src", "href")]
+
+
+@pytest.mark.slow
+def test_report_renders_in_a_real_browser(test_video: Path, tmp_path: Path) -> None:
+    """The page of a real clip's record, with an event on its tracked car, opens in headless
+    Chromium: every plot is drawn, the thumbnail decodes, and nothing is fetched from outside."""
+    browser = _chromium()
+    records = process_clip(test_video, tmp_path)
+    seen = [r["frame"] for r in records if any(v["id"] == 1 for v in r["vehicles"])]
+    assert len(seen) > 20
+    events = tmp_path / "e.jsonl"
+    event = Event("close_following", seen[0], seen[20], seen[0] / 25, seen[20] / 25, 1, 0.8)
+    events.write_text(json.dumps(event_record(event)) + "\n")
+    page = tmp_path / "report.html"
+    done = run_cli(
+        "report", tmp_path / "r.jsonl", "--events", events, "--video", test_video, "-o", page
+    )
+    assert done.returncode == 0, done.stderr
+    assert "1 events" in done.stdout
+
+    parser = _Resources()
+    parser.feed(page.read_text())
+    assert parser.links and all(link.startswith("data:image/jpeg;base64,") for link in parser.links)
+
+    profile = tmp_path / "profile"
+    dom = subprocess.run(
+        [browser, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--dump-dom", page.as_uri()],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
+    # Every plot with a measured value is drawn (test_video's car is in the lane to our right:
+    # no distance to a vehicle ahead).
+    _, series = record_series(records)
+    measured = [s.key for s in series if np.isfinite(s.values).any()]
+    assert len(series) == 5 and "distance" not in measured
+    assert re.search(rf'data-plots-drawn="{len(measured)}"', dom), dom[:300]
+    assert re.search(r'data-thumbnails-shown="1"', dom), dom[:300]
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [browser, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--screenshot={shot}",
+         "--window-size=1000,2000", page.as_uri()],
+        capture_output=True, timeout=120, check=True,
+    )  # fmt: skip
+    picture = cv2.imread(str(shot))
+    assert picture is not None and picture.shape[:2] == (2000, 1000)
+    # The plots' blue lines and the thumbnail's road (not white) are on the screen.
+    blue = (picture[..., 0] > 150) & (picture[..., 2] < 80)
+    assert blue.sum() > 2000
+    assert (picture.std(axis=2) + np.abs(picture.mean(axis=2) - 255) > 30).mean() > 0.05
+
+
+def test_report_problems_are_one_line(tmp_path: Path, test_video: Path) -> None:
+    record = tmp_path / "r.jsonl"
+    assert_one_line_error(run_cli("report", record), "cannot read record")
+    record.write_text('{"frame": 0, "time_s": 0.0, "size": [1280, 720]}\n')
+    assert_one_line_error(run_cli("report", record, "-o", record), "not an .html name")
+    page = tmp_path / "r.html"
+    bad = tmp_path / "e.jsonl"
+    bad.write_text('{"kind": "sneezing"}\n')
+    assert_one_line_error(run_cli("report", record, "--events", bad, "-o", page), "not an event")
+    small = tmp_path / "small.jsonl"
+    small.write_text('{"frame": 0, "time_s": 0.0, "size": [640, 360]}\n')
+    events = tmp_path / "ok.jsonl"
+    events.write_text(json.dumps(event_record(Event("closing_fast", 0, 0, 0.0, 0.0, 1, 2.0))))
+    assert_one_line_error(
+        run_cli("report", small, "--events", events, "--video", test_video, "-o", page),
+        "the record's frames are 640x360",
+    )
+    assert not page.exists()
+    done = run_cli("report", record)
+    assert done.returncode == 0 and (tmp_path / "r_report.html").exists()
