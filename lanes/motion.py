@@ -35,9 +35,10 @@ def road_shift(
 
 
 class RoadMotion:
-    """History for ego motion: the previous view and the recent advances (median-smoothed)."""
+    """History for ego motion: the previous view and the recent advances (the median of the last
+    `smoothing` frames: single measurements scatter by up to 20 %, a car's speed does not)."""
 
-    def __init__(self, smoothing: int = 5, min_response: float = 0.2) -> None:
+    def __init__(self, smoothing: int = 15, min_response: float = 0.2) -> None:
         self.min_response = min_response
         self.recent: deque[float] = deque(maxlen=smoothing)
         self._previous: NDArray[np.float32] | None = None
