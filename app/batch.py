@@ -15,7 +15,7 @@ import json
 import os
 import socket
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -31,7 +31,8 @@ if TYPE_CHECKING:
 VIDEO_SUFFIXES = frozenset(
     {".mp4", ".m4v", ".mov", ".mkv", ".avi", ".webm", ".ts", ".mts", ".flv", ".wmv", ".mpg"}
 )
-TABLE = "table"  # DIR/table/{frames,vehicles}/*.parquet and DIR/table/manifest.parquet
+TABLE = "table"  # DIR/table/{frames,vehicles,events}/*.parquet and DIR/table/manifest.parquet
+PARTS = ("frames", "vehicles", "events")
 
 
 @dataclass(frozen=True)
@@ -115,7 +116,7 @@ def outputs_of(entry: BatchInput, out: Path) -> tuple[Path, Path]:
 def remove_temporaries(entry: BatchInput, out: Path) -> None:
     """Delete the temporary files an interrupted or killed task left for this input's outputs."""
     video, record = outputs_of(entry, out)
-    parts = [out / TABLE / t / f"{_key(entry)}.parquet" for t in ("frames", "vehicles")]
+    parts = [out / TABLE / t / f"{_key(entry)}.parquet" for t in PARTS]
     for target in (video, record, *parts):
         for stale in target.parent.glob(f".{target.stem}.*.tmp{target.suffix}"):
             stale.unlink(missing_ok=True)
@@ -173,6 +174,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     from app.annotators import default_annotators
     from app.assembly import build_stages
     from app.drivers import process_video
+    from app.events import event_record
     from app.runtime import tune_process
     from camera_cal import load_calibration
 
@@ -193,7 +195,8 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]
-    write_table_parts(options.out / TABLE, _key(entry), str(entry.relative), rows)
+    events = [event_record(e) for e in summary.events]
+    write_table_parts(options.out / TABLE, _key(entry), str(entry.relative), rows, events)
     return summary.frames, summary.video_seconds
 
 
@@ -203,7 +206,7 @@ def _schema(*columns: tuple[str, str]) -> Any:
     return pa.schema([(name, pa.type_for_alias(kind)) for name, kind in columns])
 
 
-# The queryable tables: one row per frame, and one per shown vehicle in a frame.
+# The queryable tables: one row per frame, one per shown vehicle in a frame, one per event.
 FRAME_COLUMNS = (
     ("video", "string"),
     ("frame", "int64"),
@@ -212,6 +215,9 @@ FRAME_COLUMNS = (
     ("curvature_m", "double"),
     ("offset_m", "double"),
     ("vehicles", "int64"),
+    ("speed_kmh", "double"),
+    ("headway_s", "double"),
+    ("ttc_s", "double"),
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -222,11 +228,32 @@ VEHICLE_COLUMNS = (
     ("x2", "double"),
     ("y2", "double"),
     ("score", "double"),
+    ("distance_m", "double"),
+    ("lateral_m", "double"),
+    ("lane", "string"),
+    ("closing_mps", "double"),
+)
+EVENT_COLUMNS = (
+    ("video", "string"),
+    ("kind", "string"),
+    ("start_s", "double"),
+    ("end_s", "double"),
+    ("start_frame", "int64"),
+    ("end_frame", "int64"),
+    ("vehicle_id", "int64"),
+    ("worst", "double"),
 )
 
 
-def write_table_parts(table: Path, key: str, video: str, rows: list[dict[str, Any]]) -> None:
-    """One input's rows of the frames and vehicles tables, each an atomically written Parquet."""
+def write_table_parts(
+    table: Path,
+    key: str,
+    video: str,
+    rows: list[dict[str, Any]],
+    events: Sequence[dict[str, Any]] = (),
+) -> None:
+    """One input's rows of the frames, vehicles and events tables, each an atomically written
+    Parquet file; `rows` are its record's lines, `events` its event records."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -239,18 +266,24 @@ def write_table_parts(table: Path, key: str, video: str, rows: list[dict[str, An
             "curvature_m": (r.get("lane") or {}).get("curvature_m"),
             "offset_m": (r.get("lane") or {}).get("offset_m"),
             "vehicles": len(r.get("vehicles", [])),
+            "speed_kmh": r.get("speed_kmh"),
+            "headway_s": r.get("headway_s"),
+            "ttc_s": r.get("ttc_s"),
         }
         for r in rows
     ]
+    facts = ("distance_m", "lateral_m", "lane", "closing_mps")
     vehicles = [
         {"video": video, "frame": r["frame"], "id": v["id"], "score": v["score"]}
         | dict(zip(("x1", "y1", "x2", "y2"), v["box"], strict=True))
+        | {name: v.get(name) for name in facts}
         for r in rows
         for v in r.get("vehicles", [])
     ]
     for name, data, columns in (
         ("frames", frames, FRAME_COLUMNS),
         ("vehicles", vehicles, VEHICLE_COLUMNS),
+        ("events", [{"video": video} | e for e in events], EVENT_COLUMNS),
     ):
         with atomic_output(table / name / f"{key}.parquet") as tmp:
             pq.write_table(pa.Table.from_pylist(data, schema=_schema(*columns)), tmp)

@@ -89,6 +89,13 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
     ranked = ranked.sort_by([("vehicles_mean", "descending")]).to_pylist()
     assert {r["video"] for r in ranked} == {f["video"] for f in frames}
     assert 0.0 <= 1 - pc.mean(table["lane_found"].cast("int8")).as_py() <= 1.0
+    # The facts are in the tables as in the record; the events table exists (no event here).
+    speeds = [f["speed_kmh"] for f in frames if f["video"] == "sub/project_cut_2.mp4"]
+    assert speeds == [r["speed_kmh"] for r in lines]
+    assert {v["lane"] for v in vehicles} <= {"ego", "left", "right", "other"}
+    events = ds.dataset(out / "table" / "events").to_table()
+    assert events.num_rows == 0 and "vehicle_id" in events.column_names
+    events.group_by(["video", "kind"]).aggregate([("kind", "count")])
     again = run_cli("batch", inputs, "--out", out, "--workers", "2", "--no-video")
     assert "0 done, 1 failed, 3 skipped" in again.stdout, again.stdout
 
@@ -214,3 +221,13 @@ def test_ctrl_c_keeps_what_finished_and_the_next_run_resumes(inputs: Path, tmp_p
     again = run_cli("batch", inputs, "--out", out, "--workers", "1", "--no-video")
     done_before = sum(1 for n in kept if n != "broken.mp4")
     assert f"{3 - done_before} done, 1 failed, {done_before} skipped" in again.stdout, again.stdout
+
+
+def test_events_table_holds_each_event(tmp_path: Path) -> None:
+    from app.batch import write_table_parts
+    from app.events import Event, event_record
+
+    event = Event("close_following", 10, 84, 0.4, 3.36, 7, 0.7)
+    write_table_parts(tmp_path, "k", "a/b.mp4", [], [event_record(event)])
+    (row,) = pq.read_table(tmp_path / "events").to_pylist()
+    assert row == {"video": "a/b.mp4"} | event_record(event)
