@@ -39,6 +39,12 @@ CalibrationOption = Annotated[
 ModelOption = Annotated[
     Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
 ]
+HorizonOption = Annotated[
+    float | None,
+    typer.Option(
+        metavar="Y", help="Horizon row in pixels (default: estimated from the footage)."
+    ),
+]
 
 
 @cli.callback()
@@ -135,6 +141,7 @@ def process_command(
     ] = True,
     model: ModelOption = None,
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
+    horizon: HorizonOption = None,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -152,12 +159,28 @@ def process_command(
     annotators = default_annotators(insets)
     if still:
         summary = process_still(
-            source, output, cal, *stages, record, annotators, log=lambda m: typer.echo(m, err=True)
+            source,
+            output,
+            cal,
+            *stages,
+            record,
+            annotators,
+            log=lambda m: typer.echo(m, err=True),
+            horizon_y=horizon,
         )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
         summary = process_video(
-            source, output, cal, *stages, record, annotators, start, end, events_file=events
+            source,
+            output,
+            cal,
+            *stages,
+            record,
+            annotators,
+            start,
+            end,
+            events_file=events,
+            horizon_y=horizon,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -220,6 +243,7 @@ def debug_command(
     ] = None,
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
     model: ModelOption = None,
+    horizon: HorizonOption = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -233,7 +257,7 @@ def debug_command(
     folder = out if out is not None else source.with_name(f"{source.stem}_debug")
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
-    pipeline = Pipeline(cal, *build_stages(model=model, keep_debug=True))
+    pipeline = Pipeline(cal, *build_stages(model=model, keep_debug=True), horizon_y=horizon)
     written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 

@@ -12,10 +12,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
+from app.drivers import check_horizon
 from app.errors import InputError
 from app.pipeline import FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
 from app.sources import Frame, probe_video, read_frames
+from camera_cal import SceneGeometry
 from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
 
@@ -45,9 +47,25 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
     return compose(frame, shown, [BoxAnnotator(color)])
 
 
+def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
+    """The scene geometry on the frame: the live box (green), the horizon (blue: estimated from
+    the footage; grey: the default or --horizon)."""
+    picture = frame.copy()
+    x0, y0, x1, y1 = scene.live
+    cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
+    y = round(scene.horizon_y)
+    color = (40, 120, 255) if scene.estimated else (160, 160, 160)
+    cv2.line(picture, (x0, y), (x1 - 1, y), color, 2, cv2.LINE_AA)
+    label = "horizon (estimated)" if scene.estimated else "horizon (default)"
+    cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
+    return picture
+
+
 def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.uint8]]:
     """Named pictures of every intermediate of one processed frame, in pipeline order."""
     pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
+    if out.result.scene is not None:
+        pictures["scene"] = scene_picture(out.undistorted, out.result.scene)
     lane = out.result.lane
     if lane is not None and lane.debug is not None:
         pictures["lane_mask"] = (lane.debug.mask * 255).astype(np.uint8)
@@ -135,10 +153,11 @@ def run_debug(
     if first >= info.n_frames:
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
+    check_horizon(pipeline.horizon_y, info.size)
     ensure_writable_dir(out_dir)
-    pipeline.prepare(info.size, info.fps)
-    annotators = default_annotators(insets=True)
     start = max(0, first - WARMUP_FRAMES)
+    pipeline.prepare(info.size, info.fps, start)
+    annotators = default_annotators(insets=True)
     written: list[Path] = []
     names: list[str] = []
     done: list[int] = []

@@ -55,6 +55,15 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
     return first, last
 
 
+def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
+    """A user's horizon row must lie inside the frame."""
+    if horizon_y is not None and not 0 <= horizon_y < size[1]:
+        raise InputError(
+            f"--horizon {horizon_y:g} is outside the frame ({size[1]} rows); "
+            f"pass a row from 0 to {size[1] - 1}"
+        )
+
+
 def process_video(
     source: Path,
     output: Path | None,
@@ -67,17 +76,20 @@ def process_video(
     end_s: float | None = None,
     vehicles_in_worker: bool = True,
     events_file: Path | None = None,
+    horizon_y: float | None = None,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success.
 
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
+    `horizon_y` fixes the horizon row instead of estimating it from the footage.
     """
     warm_up = warm_up_opencv()
     try:
         info = probe_video(source)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
+        check_horizon(horizon_y, info.size)
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()
@@ -85,7 +97,7 @@ def process_video(
     count = 0
     progress = Progress(last - first, label=source.name)
     with (
-        Pipeline(calibration, lanes, vehicles, vehicles_in_worker) as pipeline,
+        Pipeline(calibration, lanes, vehicles, vehicles_in_worker, horizon_y) as pipeline,
         ExitStack() as sinks,
     ):
         pipeline.prepare(info.size, info.fps, first)
@@ -144,6 +156,7 @@ def process_still(
     record: Path | None = None,
     annotators: Sequence[Annotator] = (),
     log: Callable[[str], None] = lambda message: None,
+    horizon_y: float | None = None,
 ) -> RunSummary:
     """Process one still into an annotated image (and a one-line record).
 
@@ -152,6 +165,7 @@ def process_still(
     """
     image = read_image(source)
     size = (image.shape[1], image.shape[0])
+    check_horizon(horizon_y, size)
     started = time.perf_counter()
     if calibration is not None and not fits(calibration, size):
         cw, ch = calibration.image_size
@@ -160,7 +174,7 @@ def process_still(
             f"({cw}x{ch}); processing it without undistortion"
         )
         calibration = None
-    with Pipeline(calibration, lanes, vehicles) as pipeline:
+    with Pipeline(calibration, lanes, vehicles, horizon_y=horizon_y) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)
     with ExitStack() as sinks:

@@ -18,7 +18,13 @@ from app.facts import FactsTracker, FrameFacts, RoadGeometry
 from app.sources import Frame
 from app.stages import FrameStage
 from app.workers import StageWorker
-from camera_cal import Calibration, Undistorter, build_undistorter
+from camera_cal import (
+    Calibration,
+    SceneGeometry,
+    SceneTracker,
+    Undistorter,
+    build_undistorter,
+)
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
 from lanes.perspective import birdseye_for
@@ -33,6 +39,7 @@ class FrameResult:
     vehicles: VehicleResult | None = None
     facts: FrameFacts | None = None
     events: tuple[Event, ...] = ()  # the driving events under way at this frame
+    scene: SceneGeometry | None = None  # live picture and horizon as of this frame
     timings_ms: dict[str, float] = field(default_factory=dict)
 
 
@@ -42,6 +49,16 @@ class FrameOutput:
 
     undistorted: Frame
     result: FrameResult
+
+
+@dataclass(frozen=True, eq=False)
+class _Started:
+    """A frame between the two halves of its processing (the vehicles may still be running)."""
+
+    undistorted: Frame
+    scene: SceneGeometry
+    lane: LaneResult | None
+    timings: dict[str, float]
 
 
 class Pipeline:
@@ -59,8 +76,10 @@ class Pipeline:
         lanes: LaneFinder | None = None,
         vehicles: VehicleDetector | None = None,
         vehicles_in_worker: bool = False,
+        horizon_y: float | None = None,
     ) -> None:
         self.calibration = calibration
+        self.horizon_y = horizon_y  # the user's horizon row; None: estimated from the footage
         self.lanes = lanes
         self.vehicles = vehicles
         self.vehicles_in_worker = vehicles_in_worker and vehicles is not None
@@ -68,6 +87,7 @@ class Pipeline:
         self._undistorter: Undistorter | None = None
         self._worker: StageWorker | None = None
         self._geometry: RoadGeometry | None = None
+        self._scene: SceneTracker | None = None
         self._facts: FactsTracker | None = None
         self._events = EventDetector()
         self._fps = 0.0
@@ -102,6 +122,7 @@ class Pipeline:
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
+        self._scene = SceneTracker(size, self._geometry.horizon_y, self.horizon_y)
         self._facts = FactsTracker(fps)
         self._events.reset()
         self._fps, self._frame = fps, first_frame
@@ -131,37 +152,40 @@ class Pipeline:
 
     def run(self, frame: Frame) -> FrameOutput:
         """Undistort one frame and pass it through every stage."""
-        return self._finish(*self._start(frame))
+        return self._finish(self._start(frame))
 
     def stream(self, frames: Iterator[Frame]) -> Iterator[FrameOutput]:
         """Every frame's output, in order; with the worker, one frame is in flight meanwhile."""
         lag = 1 if self._worker is not None else 0
-        pending: deque[tuple[Frame, LaneResult | None, dict[str, float]]] = deque()
+        pending: deque[_Started] = deque()
         for frame in frames:
             pending.append(self._start(frame))
             if len(pending) > lag:
-                yield self._finish(*pending.popleft())
+                yield self._finish(pending.popleft())
         while pending:
-            yield self._finish(*pending.popleft())
+            yield self._finish(pending.popleft())
 
-    def _start(self, frame: Frame) -> tuple[Frame, LaneResult | None, dict[str, float]]:
-        """Undistort, hand the frame to the worker, and run the lanes here."""
+    def _start(self, frame: Frame) -> _Started:
+        """Undistort, hand the frame to the worker, and run the scene and the lanes here."""
         t0 = time.perf_counter()
         undistorted = self.undistort(frame)
         timings = {"undistort": (time.perf_counter() - t0) * 1000}
         if self._worker is not None:
             self._worker.submit(undistorted)
+        assert self._scene is not None
+        t0 = time.perf_counter()
+        scene = self._scene.update(undistorted)
+        timings["scene"] = (time.perf_counter() - t0) * 1000
         lane = None
         if self.lanes is not None:
             t0 = time.perf_counter()
             lane = self.lanes.process(undistorted)
             timings["lanes"] = (time.perf_counter() - t0) * 1000
-        return undistorted, lane, timings
+        return _Started(undistorted, scene, lane, timings)
 
-    def _finish(
-        self, undistorted: Frame, lane: LaneResult | None, timings: dict[str, float]
-    ) -> FrameOutput:
+    def _finish(self, started: _Started) -> FrameOutput:
         """Add the vehicles (from the worker, or run here) to the frame's result."""
+        undistorted, lane, timings = started.undistorted, started.lane, started.timings
         vehicles = None
         if self._worker is not None:
             found, timings["vehicles"] = self._worker.collect()
@@ -194,4 +218,5 @@ class Pipeline:
                 )
             )
         self._frame += 1
-        return FrameOutput(undistorted, FrameResult(lane, vehicles, facts, events, timings))
+        result = FrameResult(lane, vehicles, facts, events, started.scene, timings)
+        return FrameOutput(undistorted, result)

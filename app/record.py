@@ -62,6 +62,8 @@ def frame_record(
 ) -> dict[str, Any]:
     """The record object of one frame."""
     record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4), "size": list(size)}
+    if result.scene is not None:
+        record["horizon_y"] = round(result.scene.horizon_y, 1)
     facts = result.facts
     if result.vehicles is not None:
         vehicles = vehicles_record(result.vehicles.detections)

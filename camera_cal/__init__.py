@@ -1,4 +1,5 @@
-"""Camera calibration from chessboard photos and per-frame undistortion."""
+"""Camera calibration from chessboard photos, per-frame undistortion, and the scene geometry
+(live picture and horizon) read off the footage."""
 
 from camera_cal.calibration import (
     Calibration,
@@ -9,12 +10,15 @@ from camera_cal.calibration import (
     load_calibration,
     save_calibration,
 )
+from camera_cal.scene import SceneGeometry, SceneTracker
 from camera_cal.undistort import CalibrationMismatch, Undistorter, build_undistorter, fits
 
 __all__ = [
     "Calibration",
     "CalibrationError",
     "CalibrationMismatch",
+    "SceneGeometry",
+    "SceneTracker",
     "Undistorter",
     "build_undistorter",
     "calibrate",

@@ -180,6 +180,7 @@ def test_debug_writes_every_intermediate(test_video: Path, tmp_path: Path) -> No
     assert result.returncode == 0, result.stderr
     expected = [
         "undistorted",
+        "scene",
         "lane_mask",
         "birdseye_fit",
         "window_hits",

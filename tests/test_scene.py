@@ -1,0 +1,106 @@
+"""Scene geometry read off the footage: black bars and the horizon, also on re-framed clips."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from app.sources import probe_video, read_frames
+from camera_cal.scene import SceneTracker, live_box, road_segments, vanishing_point
+from tests.helpers import assert_one_line_error, process_clip, run_cli
+
+Frame = np.ndarray
+
+
+def _road(size: tuple[int, int], vp: tuple[float, float], bars: int = 0) -> Frame:
+    """A synthetic road: grey asphalt below the horizon with four painted lines converging to
+    `vp`, sky above, and black bars `bars` pixels wide at both sides."""
+    w, h = size
+    frame = np.zeros((h, w, 3), np.uint8)
+    frame[: round(vp[1])] = (150, 180, 220)
+    frame[round(vp[1]) :] = (90, 90, 90)
+    for foot in (-0.6, -0.1, 0.5, 1.2):  # where each line meets the bottom row, in widths
+        x_bottom = vp[0] + foot * w
+        top = vp[1] + 0.08 * h
+        x_top = vp[0] + (x_bottom - vp[0]) * (top - vp[1]) / (h - 1 - vp[1])
+        cv2.line(frame, (round(x_top), round(top)), (round(x_bottom), h - 1), (240, 240, 240), 6)
+    if bars:
+        frame[:, :bars] = 0
+        frame[:, w - bars :] = 0
+    return frame
+
+
+def test_vanishing_point_and_bars_of_a_synthetic_road() -> None:
+    size, vp = (960, 540), (500.0, 260.0)
+    frame = _road(size, vp, bars=80)
+    grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
+    live = live_box(grey.max(axis=1), grey.max(axis=0))
+    assert live == (80, 0, 880, 540)
+    point = vanishing_point(road_segments(grey, live, 290), tolerance=10)
+    assert point is not None and np.allclose(point, vp, atol=4)
+    # One family of parallel edges fixes no point.
+    one_way = road_segments(grey, (500, 0, 880, 540), 290)
+    assert vanishing_point(one_way, tolerance=10) is None
+    # The tracker: the default until enough frames agree, then the estimate; --horizon wins.
+    tracker = SceneTracker(size, default_horizon=300.0, every=1)
+    geometries = [tracker.update(frame) for _ in range(8)]
+    assert geometries[0].horizon_y == 300.0 and not geometries[0].estimated
+    assert geometries[-1].estimated and abs(geometries[-1].horizon_y - vp[1]) < 4
+    assert geometries[-1].live == live
+    fixed = SceneTracker(size, default_horizon=300.0, fixed_horizon=222.0, every=1)
+    assert all(fixed.update(frame).horizon_y == 222.0 for _ in range(8))
+
+
+def _final_horizon(video: Path, change: Callable[[Frame], Frame], frames: int = 90) -> float:
+    info = probe_video(video)
+    tracker: SceneTracker | None = None
+    for k, frame in enumerate(read_frames(video, info)):
+        if k >= frames:
+            break
+        picture = np.ascontiguousarray(change(frame))
+        if tracker is None:
+            h, w = picture.shape[:2]
+            tracker = SceneTracker((w, h), default_horizon=0.5 * h)  # a poor default on purpose
+        tracker.update(picture)
+    assert tracker is not None and tracker.current.estimated
+    return tracker.current.horizon_y
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("clip", ["test_video", "project_cut_2"])
+def test_the_horizon_follows_a_reframed_clip(data_dir: Path, clip: str) -> None:
+    """Cropping, padding, scaling or barring the picture moves the estimated horizon exactly as
+    it moves the road: within 1 % of the height of the original's, transformed the same way."""
+    video = data_dir / "videos" / f"{clip}.mp4"
+    plain = _final_horizon(video, lambda f: f)
+    assert abs(plain - 420.8) < 0.015 * 720  # the calibrated warp's horizon on this camera
+    cut = 72  # 10 % of the height
+    black = np.zeros((cut, 1280, 3), np.uint8)
+    side = np.zeros((720, 160, 3), np.uint8)
+    cases: list[tuple[Callable[[Frame], Frame], float, int]] = [
+        (lambda f: f[cut:], plain - cut, 648),  # horizon 10 % higher in the picture
+        (lambda f: np.vstack([black, f[:-cut]]), plain + cut, 720),  # 10 % lower
+        (lambda f: f[:, 160:1120], plain, 720),  # 4:3 crop
+        (lambda f: np.hstack([side, f[:, 160:1120], side]), plain, 720),  # black side bars
+        (lambda f: cv2.resize(f, (960, 540), interpolation=cv2.INTER_AREA), plain * 0.75, 540),
+        (lambda f: cv2.resize(f, (1920, 1080)), plain * 1.5, 1080),
+    ]
+    for change, expected, height in cases:
+        found = _final_horizon(video, change)
+        assert abs(found - expected) <= 0.01 * height, (expected, found)
+
+
+def test_horizon_in_the_record_and_the_override(test_video: Path, tmp_path: Path) -> None:
+    rows = process_clip(test_video, tmp_path, "--end", "0.8")
+    horizons = [r["horizon_y"] for r in rows]
+    assert all(400 < h < 440 for h in horizons)
+    fixed = process_clip(test_video, tmp_path, "--end", "0.4", "--horizon", "380")
+    assert {r["horizon_y"] for r in fixed} == {380.0}
+    assert_one_line_error(
+        run_cli("process", test_video, "-o", tmp_path / "x.mp4", "--horizon", "720"),
+        "--horizon 720 is outside the frame (720 rows)",
+    )
