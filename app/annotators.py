@@ -108,46 +108,39 @@ def hud_lines(
     return lines
 
 
-def draw_panel(frame: Frame, lines: list[str]) -> None:
-    """A dark translucent panel at the top left with one line of text per item."""
+def _text_block(
+    frame: Frame,
+    lines: list[str],
+    color: tuple[int, int, int],
+    keep: float,
+    size: float,
+    line_px: int,
+    centred: bool,
+) -> None:
+    """White lines of text on a translucent block (`keep` of the scene shows through) at the top
+    left, or the top centre; sizes in pixels at 720 rows."""
     if not lines:
         return
     s = _scale(frame)
-    font, size, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.8 * s, max(1, round(2 * s))
-    line_h = round(34 * s)
-    width = max(cv2.getTextSize(t, font, size, thick)[0][0] for t in lines) + round(30 * s)
-    height = line_h * len(lines) + round(16 * s)
-    roi = frame[:height, :width]
-    roi[:] = (roi * 0.4 + np.array(PANEL) * 0.6).astype(np.uint8)
+    font, size, thick = cv2.FONT_HERSHEY_SIMPLEX, size * s, max(1, round(2 * s))
+    line_h, pad = round(line_px * s), round(16 * s)
+    width = max(cv2.getTextSize(t, font, size, thick)[0][0] for t in lines) + 2 * pad
+    x0 = max((frame.shape[1] - width) // 2, 0) if centred else 0
+    roi = frame[: line_h * len(lines) + pad, x0 : x0 + width]
+    roi[:] = (roi * keep + np.array(color) * (1 - keep)).astype(np.uint8)
     for i, text in enumerate(lines):
-        cv2.putText(
-            frame,
-            text,
-            (round(14 * s), round((i + 1) * line_h)),
-            font,
-            size,
-            TEXT,
-            thick,
-            cv2.LINE_AA,
-        )
+        origin = (x0 + pad, round((i + 1) * line_h))
+        cv2.putText(frame, text, origin, font, size, TEXT, thick, cv2.LINE_AA)
+
+
+def draw_panel(frame: Frame, lines: list[str]) -> None:
+    """A dark translucent panel at the top left with one line of text per item."""
+    _text_block(frame, lines, PANEL, keep=0.4, size=0.8, line_px=34, centred=False)
 
 
 def draw_banner(frame: Frame, lines: list[str]) -> None:
     """A red banner across the top centre with one line per event under way."""
-    if not lines:
-        return
-    s = _scale(frame)
-    font, size, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.9 * s, max(1, round(2 * s))
-    line_h = round(38 * s)
-    width = max(cv2.getTextSize(t, font, size, thick)[0][0] for t in lines) + round(40 * s)
-    x0 = max((frame.shape[1] - width) // 2, 0)
-    roi = frame[: line_h * len(lines) + round(14 * s), x0 : x0 + width]
-    roi[:] = (roi * 0.25 + np.array(BANNER) * 0.75).astype(np.uint8)
-    for i, text in enumerate(lines):
-        cv2.putText(
-            frame, text, (x0 + round(20 * s), round((i + 1) * line_h)), font, size, TEXT, thick,
-            cv2.LINE_AA,
-        )  # fmt: skip
+    _text_block(frame, lines, BANNER, keep=0.25, size=0.9, line_px=38, centred=True)
 
 
 def banner_lines(events: Sequence[Event]) -> list[str]:
