@@ -73,11 +73,18 @@ class Event:
         """The kind in words, e.g. 'close following'."""
         return KIND_TITLES[self.kind]
 
+    @property
+    def worst_text(self) -> str:
+        """The worst value with its unit ('worst 0.70 s'), or '' without one."""
+        if self.worst is None:
+            return ""
+        unit = "m" if self.kind.startswith("lane") else "s"
+        return f"worst {self.worst:.2f} {unit}"
+
     def describe(self) -> str:
         """One short line for the closing summary."""
         who = f", vehicle {self.vehicle_id}" if self.vehicle_id is not None else ""
-        unit = "m" if self.kind.startswith("lane") else "s"
-        worst = f", worst {self.worst:.2f} {unit}" if self.worst is not None else ""
+        worst = f", {self.worst_text}" if self.worst is not None else ""
         return f"{self.title} {self.start_s:.2f}-{self.end_s:.2f} s{who}{worst}"
 
 

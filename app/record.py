@@ -80,10 +80,12 @@ def frame_record(
     return record
 
 
-def read_record_lines(path: Path, what: str = "record") -> Iterator[tuple[int, dict[str, Any]]]:
+def read_record_lines(
+    path: Path, what: str = "record", option: str = "--json"
+) -> Iterator[tuple[int, dict[str, Any]]]:
     """(line number, object) of each line of a JSON-lines file written by roadview, with a clear
-    error on a missing file or a malformed line; `what` names the file in the error."""
-    option = "--events" if "events" in what else "--json"
+    error on a missing file or a malformed line; `what` names the file in the error and
+    `option` the `process` option that writes it."""
     try:
         lines = Path(path).read_text().splitlines()
     except (OSError, UnicodeDecodeError) as error:

@@ -135,8 +135,8 @@ def svg_plot(
         low, high = 0.0, 1.0
     pad = max((high - low) * 0.08, 0.5 if series.step else 1e-3)
     low, high = low - pad, high + pad
-    if series.step or series.key == "speed":
-        low = max(low, 0.0) if values[known].min(initial=0.0) >= 0 else low
+    if (series.step or series.key == "speed") and not (values[known] < 0).any():
+        low = max(low, 0.0)  # counts and speeds: no axis below zero
     inner_w, inner_h = PLOT_W - MARGIN_L - MARGIN_R, PLOT_H - MARGIN_T - MARGIN_B
 
     def x_of(t: float) -> float:
@@ -284,13 +284,11 @@ def report_html(
             else '<span class="muted">no video given (--video)</span>'
         )
         who = f"vehicle {event.vehicle_id}" if event.vehicle_id is not None else ""
-        unit = "m" if event.kind.startswith("lane") else "s"
-        worst = f"worst {event.worst:.2f} {unit}" if event.worst is not None else ""
         event_rows.append(
             f'<tr class="event" data-kind="{event.kind}"><td>{picture}</td>'
             f"<td><b>{html.escape(event.title)}</b><br>{event.start_s:.2f}-{event.end_s:.2f} s "
             f"({event.end_s - event.start_s:.1f} s), frames {event.start_frame}-"
-            f"{event.end_frame}<br>{who}<br>{worst}</td></tr>"
+            f"{event.end_frame}<br>{who}<br>{event.worst_text}</td></tr>"
         )
     events_html = (
         f"<table>{''.join(event_rows)}</table>"
@@ -312,7 +310,7 @@ def report_html(
 def read_events(path: Path) -> list[Event]:
     """The events of an `--events` file, with a clear error on a malformed line."""
     events = []
-    for number, obj in read_record_lines(path, "events file"):
+    for number, obj in read_record_lines(path, "events file", "--events"):
         try:
             events.append(event_from_record(obj))
         except (KeyError, TypeError, ValueError):

@@ -149,9 +149,7 @@ class SceneTracker:
         # Bars: sample every 4th row and column (bars are wide; this costs ~1 ms).
         np.maximum(self._row_max, grey[:, ::4].max(axis=1), out=self._row_max)
         np.maximum(self._col_max, grey[::4].max(axis=0), out=self._col_max)
-        live = self._box() if self._count % self.every == 0 or self._count < 2 else None
-        if live is None:
-            live = self._current.live
+        live = self._box() if self._count % self.every == 0 else self._current.live
         if self.fixed_horizon is None and self._count % self.every == 0:
             self._measure(grey, live)
         self._count += 1
