@@ -65,61 +65,83 @@ def test_road_motion_measures_a_known_shift() -> None:
     assert all(a is not None and abs(a - step * 0.125) < 0.02 for a in advances[1:])
 
 
-def _dash_arrivals(painted: np.ndarray, on: int = 2, off: int = 3) -> list[int]:
-    """Frames where a dash arrives at a row: paint for `on` frames after at least `off` frames
-    without (single-frame flicker of the mask is no dash)."""
-    arrivals, quiet = [], off
-    for k in range(len(painted) - on + 1):
-        if painted[k : k + on].all() and quiet >= off:
-            arrivals.append(k)
-            quiet = 0
-        quiet = quiet + 1 if not painted[k] else 0
-    return arrivals
+def _dash_centres(painted: np.ndarray, min_len: int, max_hole: int) -> list[float]:
+    """Rows of the centres of the whole dashes along a line's paint profile (top to bottom):
+    runs of paint at least `min_len` rows long once holes up to `max_hole` rows are closed (a
+    raised marker between dashes is shorter); dashes cut by the view's edge are left out."""
+    rows = np.flatnonzero(painted)
+    if rows.size == 0:
+        return []
+    runs = np.split(rows, np.flatnonzero(np.diff(rows) > max_hole + 1) + 1)
+    return [
+        (r[0] + r[-1]) / 2
+        for r in runs
+        if r[-1] - r[0] + 1 >= min_len and r[0] > 0 and r[-1] < len(painted) - 1
+    ]
+
+
+def _crossings(centres: list[list[float]], row: float, max_step: float) -> list[float]:
+    """Times (in frames, interpolated between frames) at which dash centres pass `row`: each
+    centre is matched to the one of the previous frame at most `max_step` rows behind it."""
+    times = []
+    for k in range(len(centres) - 1):
+        for after in centres[k + 1]:
+            before = [c for c in centres[k] if after - max_step <= c < after]
+            if before and max(before) < row <= after:
+                times.append(k + (row - max(before)) / (after - max(before)))
+    return times
 
 
 def test_speed_from_the_road_matches_the_dash_count(data_dir: Path) -> None:
-    """Over each clip the speed from the road's motion agrees with the speed implied by the
-    dashes of the lane line passing fixed rows (one dash and gap every 12.19 m)."""
+    """The distance the road's motion says we drove between two dashes passing a row matches
+    the dashes' spacing (one dash and gap every 12.19 m): within 5 % over each clip, and steady."""
     for clip in ("test_video", "project_cut_1", "project_cut_2"):
         video = data_dir / "videos" / f"{clip}.mp4"
         info = probe_video(video)
         undistort = build_undistorter(load_calibration(default_calibration_path()), info.size)
         finder = LaneFinder()
         view = finder.view(info.size)
-        rows = np.arange(40, 200, 20)
-        painted: list[list[bool]] = []
-        advances = []
+        bh = view.size[1]
+        half = round(0.3 / view.xm_per_px)
+        centres: list[list[float]] = []
+        advances: list[float] = [0.0]  # metres driven up to each frame
         for frame in read_frames(video, info):
             image = undistort(frame)
             result = finder.process(image)
-            if result.advance_m is not None:
-                advances.append(result.advance_m)
-            mask = lane_mask(view.warp(image), LaneConfig(), view.xm_per_px, view.ym_per_px)
+            if len(centres):
+                advances.append(advances[-1] + (result.advance_m or np.nan))
             if result.lane is None:
-                painted.append([False] * len(rows))
+                centres.append([])
                 continue
-            xs = np.polyval(result.lane.right_fit, rows).round().astype(int)
-            half = round(0.3 / view.xm_per_px)
-            painted.append(
-                [
-                    bool(mask[r, max(x - half, 0) : x + half].any())
-                    for r, x in zip(rows, xs, strict=True)
-                ]
+            mask = lane_mask(view.warp(image), LaneConfig(), view.xm_per_px, view.ym_per_px)
+            xs = np.polyval(result.lane.right_fit, np.arange(bh)).round().astype(int)
+            painted = np.array(
+                [mask[r, max(x - half, 0) : x + half].any() for r, x in enumerate(xs)]
             )
-        # Consecutive arrivals at a row are one period apart, or a whole multiple of it where
-        # the mask missed a dash: each gap is divided by its multiple of the median gap.
-        gaps = np.concatenate([np.diff(_dash_arrivals(c)) for c in np.array(painted).T])
-        multiples = np.maximum(np.round(gaps / np.median(gaps)), 1)
-        period = float(gaps.sum() / multiples.sum())
-        dash_speed = DASH_PERIOD_M / (period / info.fps) * 3.6
-        road_speed = float(np.median(advances)) * info.fps * 3.6
+            centres.append(
+                _dash_centres(painted, round(1.75 / view.ym_per_px), round(1.0 / view.ym_per_px))
+            )
+        driven = np.asarray(advances)
+        frames = np.arange(len(driven))
+        ratios = []
+        for row in range(round(0.4 * bh), bh - 20, 5):  # the near part, where dashes are sharp
+            times = _crossings(centres, row, max_step=2.5 / view.ym_per_px)
+            gaps = np.diff(times)
+            for start, gap in zip(times, gaps, strict=False):
+                dashes = max(round(gap / np.median(gaps)), 1)  # a dash the mask missed
+                metres = np.interp(start + gap, frames, driven) - np.interp(start, frames, driven)
+                ratios.append(metres / (dashes * DASH_PERIOD_M))
+        assert len(ratios) >= 30, (clip, len(ratios))
+        # Each pair of dashes is one measurement; the paint itself is not laid to the centimetre
+        # (project_cut_2 has a dash 2 m out of step where the pavement changes), so the median.
+        assert abs(np.median(ratios) - 1) <= 0.05, (clip, np.percentile(ratios, [10, 50, 90]))
         # Steady, as a car on a highway is: within 8 % of the clip's median once smoothed.
-        steady = np.asarray(advances[15:]) / np.median(advances)
-        assert np.all(np.abs(steady - 1) <= 0.08), (clip, steady.min(), steady.max())
-        # Counting dashes on clips of 1.5-3.5 s (3-8 dash periods, a missed dash or a flicker of
-        # the mask shifting the count) is itself good to about 10 % here: the issue's 5 % needs
-        # longer clips (see README).
-        assert abs(road_speed - dash_speed) <= 0.15 * dash_speed, (clip, road_speed, dash_speed)
+        steps = np.diff(driven)[15:]
+        assert np.all(np.abs(steps / np.median(steps) - 1) <= 0.08), (
+            clip,
+            steps.min(),
+            steps.max(),
+        )
 
 
 @pytest.mark.slow
