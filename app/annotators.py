@@ -146,8 +146,7 @@ def draw_banner(frame: Frame, lines: list[str]) -> None:
 def banner_lines(events: Sequence[Event]) -> list[str]:
     """The banner's text: each event under way in capitals, with its vehicle's id."""
     return [
-        e.title.upper() + (f"  #{e.vehicle_id}" if e.vehicle_id is not None else "")
-        for e in events
+        e.title.upper() + (f"  #{e.vehicle_id}" if e.vehicle_id is not None else "") for e in events
     ]
 
 

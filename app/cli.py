@@ -41,9 +41,7 @@ ModelOption = Annotated[
 ]
 HorizonOption = Annotated[
     float | None,
-    typer.Option(
-        metavar="Y", help="Horizon row in pixels (default: estimated from the footage)."
-    ),
+    typer.Option(metavar="Y", help="Horizon row in pixels (default: estimated from the footage)."),
 ]
 
 

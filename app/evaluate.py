@@ -48,12 +48,16 @@ def clip_frames(path: Path) -> int | None:
 def load_labels(path: Path) -> dict[int, FrameLabels]:
     """Labels of every frame between the first and last keyframe, interpolated as documented."""
     try:
-        document = json.loads(Path(path).read_text())
-        keyframes = {int(k): v for k, v in document["keyframes"].items()}
+        return load_labels_document(json.loads(Path(path).read_text()))
     except FileNotFoundError:
         raise InputError(f"labels file {path} does not exist; see data/labels/") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         raise InputError(f"{path} is not a labels file (see ../shared/data/README.md)") from None
+
+
+def load_labels_document(document: Mapping[str, Any]) -> dict[int, FrameLabels]:
+    """`load_labels` of a document already read."""
+    keyframes = {int(k): v for k, v in document["keyframes"].items()}
     if not keyframes:
         return {}
     keys = sorted(keyframes)

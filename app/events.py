@@ -303,9 +303,7 @@ class EventDetector:
         return sorted(self.events, key=lambda e: (e.start_s, e.kind))
 
 
-def find_events(
-    signals: Iterable[FrameSignals], config: EventConfig | None = None
-) -> list[Event]:
+def find_events(signals: Iterable[FrameSignals], config: EventConfig | None = None) -> list[Event]:
     """Every event of a whole series of frames."""
     detector = EventDetector(config)
     for s in signals:
@@ -317,9 +315,7 @@ def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
     """A record line's signals (see app/record.py): the lane's offset and width, the headway and
     time to collision, and the nearest vehicle in our lane."""
     lane = row.get("lane") or {}
-    ahead = [
-        v for v in row.get("vehicles") or [] if v.get("lane") == "ego" and "distance_m" in v
-    ]
+    ahead = [v for v in row.get("vehicles") or [] if v.get("lane") == "ego" and "distance_m" in v]
     nearest = min(ahead, key=lambda v: v["distance_m"], default=None)
     return FrameSignals(
         int(row["frame"]),

@@ -11,6 +11,7 @@ import time
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 from app.errors import FrameSizeChanged
 from app.events import Event, EventDetector, FrameSignals
@@ -170,16 +171,16 @@ class Pipeline:
         t0 = time.perf_counter()
         undistorted = self.undistort(frame)
         timings = {"undistort": (time.perf_counter() - t0) * 1000}
-        if self._worker is not None:
-            self._worker.submit(undistorted)
         assert self._scene is not None
         t0 = time.perf_counter()
         scene = self._scene.update(undistorted)
         timings["scene"] = (time.perf_counter() - t0) * 1000
+        if self._worker is not None:
+            self._worker.submit(undistorted, **_stage_scene(scene))
         lane = None
         if self.lanes is not None:
             t0 = time.perf_counter()
-            lane = self.lanes.process(undistorted)
+            lane = self.lanes.process(undistorted, **_stage_scene(scene))
             timings["lanes"] = (time.perf_counter() - t0) * 1000
         return _Started(undistorted, scene, lane, timings)
 
@@ -193,9 +194,17 @@ class Pipeline:
             vehicles = found
         elif self.vehicles is not None:
             t0 = time.perf_counter()
-            vehicles = self.vehicles.process(undistorted)
+            vehicles = self.vehicles.process(undistorted, **_stage_scene(started.scene))
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
         facts = None
+        # Metres follow the lane stage's warp, which follows the scene.
+        current = self.lanes.current_view if self.lanes is not None else None
+        if (
+            self._geometry is not None
+            and current is not None
+            and current is not self._geometry.view
+        ):
+            self._geometry = RoadGeometry.of(current)
         if self._facts is not None and self._geometry is not None:
             facts = self._facts.update(
                 vehicles.detections if vehicles is not None else None,
@@ -220,3 +229,8 @@ class Pipeline:
         self._frame += 1
         result = FrameResult(lane, vehicles, facts, events, started.scene, timings)
         return FrameOutput(undistorted, result)
+
+
+def _stage_scene(scene: SceneGeometry) -> dict[str, Any]:
+    """The scene as the stages take it: plain values (they do not import camera_cal)."""
+    return {"horizon_y": scene.horizon_y, "live": scene.live}

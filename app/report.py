@@ -264,8 +264,7 @@ def report_html(
     spans = [(e.start_s, e.end_s) for e in events]
     size = rows[0].get("size", ["?", "?"])
     facts = [
-        f"<li>{len(rows)} frames, {times[0]:.2f}-{times[-1]:.2f} s, "
-        f"{size[0]}x{size[1]} px</li>"
+        f"<li>{len(rows)} frames, {times[0]:.2f}-{times[-1]:.2f} s, {size[0]}x{size[1]} px</li>"
     ]
     by_key = {s.key: s for s in series}
     if "speed" in by_key:

@@ -9,9 +9,17 @@ from numpy.typing import NDArray
 
 
 class FrameStage(Protocol):
-    """A stage sees every undistorted RGB frame in order and may keep history between frames."""
+    """A stage sees every undistorted RGB frame in order and may keep history between frames.
 
-    def process(self, frame: NDArray[np.uint8]) -> object:
+    `process` also takes the scene as plain values (the horizon row, the live box inside black
+    bars): the stages do not import the scene module, nor each other."""
+
+    def process(
+        self,
+        frame: NDArray[np.uint8],
+        horizon_y: float | None = None,
+        live: tuple[int, int, int, int] | None = None,
+    ) -> object:
         """Analyse one frame; history classes update here."""
         ...
 

@@ -43,12 +43,12 @@ def _serve(
         reply: tuple[str, Any]
         try:
             if command == "frame":
-                slot, shape = argument
+                slot, shape, context = argument
                 # A private copy: the parent refills the slot once this frame is collected.
                 frame = np.frombuffer(slots[slot], np.uint8, int(np.prod(shape))).reshape(shape)
                 frame = frame.copy()
                 t0 = time.perf_counter()
-                result = stage.process(frame)
+                result = stage.process(frame, **context)
                 reply = ("ok", (result, (time.perf_counter() - t0) * 1000))
             elif command == "reset":
                 stage.reset()
@@ -92,8 +92,9 @@ class StageWorker:
         self._pending = 0
         self._submitted = 0
 
-    def submit(self, frame: NDArray[np.uint8]) -> None:
-        """Hand over one frame; the child starts on it as soon as it is free."""
+    def submit(self, frame: NDArray[np.uint8], **context: Any) -> None:
+        """Hand over one frame (and keyword arguments for the stage's `process`, such as the
+        scene's horizon); the child starts on it as soon as it is free."""
         if self._pending >= len(self._slots):
             raise WorkerError(f"more than {len(self._slots)} frames in flight")
         if frame.nbytes > self.frame_bytes:
@@ -103,7 +104,7 @@ class StageWorker:
         # interrupt here must not keep the slot from closing).
         self._slots[slot].seek(0)
         self._slots[slot].write(np.ascontiguousarray(frame).data.cast("B"))
-        self._conn.send(("frame", (slot, frame.shape)))
+        self._conn.send(("frame", (slot, frame.shape, context)))
         self._pending += 1
         self._submitted += 1
 

@@ -206,7 +206,9 @@ def naive_detector_ms(clip: Path, frames: int = 2) -> dict[str, float]:
         t0 = time.perf_counter()
         n_windows = 0
         for band in detector.config.bands:
-            x0, y0, x1, y1, scale = band_geometry(band, info.size, cfg.patch_size)
+            x0, y0, x1, y1, scale = band_geometry(
+                band, detector.view(info.size), cfg.patch_size, detector.config.reference_horizon
+            )
             step = scale * cfg.pixels_per_cell * band.step_cells
             win = scale * cfg.patch_size
             # Windows inside the frame only (the dense search also pads past the side edges).

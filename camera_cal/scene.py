@@ -93,9 +93,7 @@ def vanishing_point(
     weights = length
     point = None
     for _ in range(8):
-        point = np.linalg.lstsq(
-            normals * weights[:, None], offsets * weights, rcond=None
-        )[0]
+        point = np.linalg.lstsq(normals * weights[:, None], offsets * weights, rcond=None)[0]
         residual = np.abs(normals @ point - offsets)
         weights = length / (1.0 + (residual / tolerance) ** 2)
     assert point is not None

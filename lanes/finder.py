@@ -78,16 +78,45 @@ class LaneFinder:
         self.right.reset()
         self.motion.reset()
 
-    def view(self, frame_size: tuple[int, int]) -> BirdsEye:
-        """The bird's-eye warp for this frame size (built once per size)."""
-        if self._view is None or self._view.frame_size != frame_size:
-            self._view = birdseye_for(frame_size, self.config)
+    def view(
+        self,
+        frame_size: tuple[int, int],
+        horizon_y: float | None = None,
+        live: tuple[int, int, int, int] | None = None,
+    ) -> BirdsEye:
+        """The bird's-eye warp for this frame size and scene (the config's horizon and the whole
+        frame when not given). Kept while the scene stays within `rewarp` of it: a new warp
+        starts the lines' history afresh."""
+        current = self._view
+        if current is not None and current.frame_size == frame_size:
+            tolerance = self.config.rewarp * frame_size[1]
+            moved = horizon_y is not None and abs(horizon_y - current.horizon_y) > tolerance
+            if live is not None:
+                moved |= (
+                    max(abs(a - b) for a, b in zip(live, current.live, strict=True)) > tolerance
+                )
+            if not moved:
+                return current
+        self._view = birdseye_for(frame_size, self.config, horizon_y, live)
+        if current is not None:
+            self.reset()
         return self._view
 
-    def process(self, frame: NDArray[np.uint8]) -> LaneResult:
-        """Find the lane in one undistorted RGB frame and update the history."""
+    @property
+    def current_view(self) -> BirdsEye | None:
+        """The warp of the last frame."""
+        return self._view
+
+    def process(
+        self,
+        frame: NDArray[np.uint8],
+        horizon_y: float | None = None,
+        live: tuple[int, int, int, int] | None = None,
+    ) -> LaneResult:
+        """Find the lane in one undistorted RGB frame and update the history (the warp placed
+        from the scene's `horizon_y` and `live` box when given)."""
         cfg = self.config
-        view = self.view((frame.shape[1], frame.shape[0]))
+        view = self.view((frame.shape[1], frame.shape[0]), horizon_y, live)
         bw, bh = view.size
         birdseye = view.warp(frame)
         advance = self.motion.update(birdseye, view.ym_per_px)

@@ -21,6 +21,8 @@ class BirdsEye:
     inverse: NDArray[np.float64]
     xm_per_px: float
     ym_per_px: float
+    horizon_y: float  # where the trapezoid's sides meet
+    live: tuple[int, int, int, int]  # the live box the trapezoid was placed in
 
     def warp(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The bird's-eye view of a frame."""
@@ -43,19 +45,54 @@ class BirdsEye:
         return np.asarray(cv2.perspectiveTransform(pts, self.matrix)).reshape(-1, 2)
 
 
-def birdseye_for(frame_size: tuple[int, int], config: LaneConfig) -> BirdsEye:
-    """The warp for frames of `frame_size`, from the fractions in `config`."""
-    w, h = frame_size
-    bw, bh = round(w * config.warp_width), round(h * config.warp_height)
-    src = np.array(
+def _corners(config: LaneConfig, w: float, h: float) -> NDArray[np.float64]:
+    """The config's source trapezoid (top left, top right, bottom right, bottom left) for a
+    picture `w` x `h`."""
+    return np.array(
         [
             [config.src_top_left_x * w, config.src_top_y * h],
             [config.src_top_right_x * w, config.src_top_y * h],
             [config.src_bottom_right_x * w, config.src_bottom_y * h],
             [config.src_bottom_left_x * w, config.src_bottom_y * h],
-        ],
-        dtype=np.float32,
+        ]
     )
+
+
+def _apex(corners: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Where the trapezoid's left and right sides meet: the vanishing point of the lane."""
+    (l0, r0, r1, l1) = corners
+    a = np.column_stack([l1 - l0, r0 - r1])
+    t = np.linalg.solve(a, r0 - l0)[0]
+    return np.asarray(l0 + t * (l1 - l0), np.float64)
+
+
+def birdseye_for(
+    frame_size: tuple[int, int],
+    config: LaneConfig,
+    horizon_y: float | None = None,
+    live: tuple[int, int, int, int] | None = None,
+) -> BirdsEye:
+    """The warp for frames of `frame_size`: the config's trapezoid, moved to the scene.
+
+    The trapezoid is the config's (tuned on a 16:9 picture) for the live box's height, scaled
+    about its vanishing point so that the vanishing point sits on `horizon_y`, centred in the
+    live box, and its bottom at the config's share of the live height: lane lines through the
+    vanishing point stay on it, and a lane's width in pixels grows with the distance below the
+    horizon as it does for any lens. Along the road the scale assumes the shipped camera's
+    vertical field of view (a crop or another lens changes it; the lane's position does not).
+    """
+    w, h = frame_size
+    lx0, ly0, lx1, ly1 = live or (0, 0, w, h)
+    lh = ly1 - ly0
+    ref_w = lh * 16 / 9  # the width the x fractions were tuned for, at this height
+    reference = _corners(config, ref_w, lh)
+    apex = _apex(reference)
+    horizon = ly0 + apex[1] if horizon_y is None else horizon_y
+    bottom = ly0 + config.src_bottom_y * lh
+    scale = (bottom - horizon) / (config.src_bottom_y * lh - apex[1])
+    centre = (lx0 + lx1) / 2 + apex[0] - ref_w / 2
+    src = np.array([centre, horizon]) + scale * (reference - apex)
+    bw, bh = round(ref_w * config.warp_width), round(lh * config.warp_height)
     dst = np.array(
         [
             [config.dst_left_x * bw, 0],
@@ -65,14 +102,19 @@ def birdseye_for(frame_size: tuple[int, int], config: LaneConfig) -> BirdsEye:
         ],
         dtype=np.float32,
     )
-    matrix = np.asarray(cv2.getPerspectiveTransform(src, dst), dtype=np.float64)
-    inverse = np.asarray(cv2.getPerspectiveTransform(dst, src), dtype=np.float64)
+    matrix = np.asarray(cv2.getPerspectiveTransform(src.astype(np.float32), dst), np.float64)
+    inverse = np.asarray(cv2.getPerspectiveTransform(dst, src.astype(np.float32)), np.float64)
     lane_px = (config.dst_right_x - config.dst_left_x) * bw
+    # A road point at row v is K / (v - horizon) ahead: rows `scale` times further below the
+    # horizon are `scale` times nearer, so the trapezoid covers that much less road.
+    length = config.warp_length_m / scale
     return BirdsEye(
         frame_size=(w, h),
         size=(bw, bh),
         matrix=matrix,
         inverse=inverse,
         xm_per_px=config.lane_width_m / lane_px,
-        ym_per_px=config.warp_length_m / bh,
+        ym_per_px=length / bh,
+        horizon_y=float(horizon),
+        live=(lx0, ly0, lx1, ly1),
     )

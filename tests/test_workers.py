@@ -28,7 +28,12 @@ class Counter:
         self.count = 0
         self.fail_at = fail_at
 
-    def process(self, frame: np.ndarray) -> Seen:
+    def process(
+        self,
+        frame: np.ndarray,
+        horizon_y: float | None = None,
+        live: tuple[int, int, int, int] | None = None,
+    ) -> Seen:
         self.count += 1
         if self.count == self.fail_at:
             raise ValueError(f"{self.key} failed on frame {self.count}")

@@ -11,7 +11,7 @@ from vehicles.config import DetectorConfig
 from vehicles.detections import Detections
 from vehicles.heatmap import Heatmap
 from vehicles.model import VehicleModel
-from vehicles.search import BandHits, LinearWeights, search_band
+from vehicles.search import BandHits, LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
 
@@ -70,20 +70,48 @@ class VehicleDetector:
         self.tracker.reset()
         self.frame_index = 0
 
-    def search(self, frame: NDArray[np.uint8], parity: int | None = None) -> tuple[BandHits, ...]:
+    def view(
+        self,
+        size: tuple[int, int],
+        horizon_y: float | None = None,
+        live: tuple[int, int, int, int] | None = None,
+    ) -> View:
+        """Where to search frames of `size`: the given horizon and live box, or the defaults."""
+        default = View.default(size, self.config.reference_horizon)
+        return View(
+            size,
+            default.horizon_y if horizon_y is None else horizon_y,
+            default.live if live is None else live,
+        )
+
+    def search(
+        self, frame: NDArray[np.uint8], parity: int | None = None, view: View | None = None
+    ) -> tuple[BandHits, ...]:
         """Window scores of the bands searched this frame (all bands when parity is None)."""
         bands = self.config.bands
         if parity is not None:
             bands = bands[parity::2]
-        return tuple(search_band(frame, band, self.weights) for band in bands)
+        where = view or self.view((frame.shape[1], frame.shape[0]))
+        found = (
+            search_band(frame, band, self.weights, where, self.config.reference_horizon)
+            for band in bands
+        )
+        return tuple(hit for hit in found if hit is not None)
 
-    def process(self, frame: NDArray[np.uint8]) -> VehicleResult:
-        """Detect, accumulate heat, label regions, and track for one undistorted RGB frame."""
+    def process(
+        self,
+        frame: NDArray[np.uint8],
+        horizon_y: float | None = None,
+        live: tuple[int, int, int, int] | None = None,
+    ) -> VehicleResult:
+        """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
+        (bands placed from the scene's `horizon_y` and `live` box when given)."""
         cfg = self.config
         h, w = frame.shape[:2]
+        view = self.view((w, h), horizon_y, live)
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
-        hits = self.search(frame, parity)
+        hits = self.search(frame, parity, view)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba = (
             self.model.probability(np.concatenate([hit.decisions for hit in hits]))
@@ -95,12 +123,9 @@ class VehicleDetector:
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
         frame_heat = self.heatmap.add((w, h), footprint(boxes[strong], cfg.heat_footprint), weight)
         region_boxes, peaks = self.heatmap.regions()
-        big = (
-            np.minimum(
-                region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
-            )
-            >= cfg.min_box * h
-        )
+        big = np.minimum(
+            region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
+        ) >= cfg.min_box * (view.live[3] - view.live[1])
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the frame's side (a car leaving); what is shown stays inside it.

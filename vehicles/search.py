@@ -89,30 +89,60 @@ class BandHits:
     decisions: NDArray[np.float64]  # (n,)
 
 
+@dataclass(frozen=True)
+class View:
+    """Where vehicles can be in frames of `size`: the horizon row and the live box (x0, y0, x1,
+    y1; inside black bars). Bands are placed relative to these, so any framing works."""
+
+    size: tuple[int, int]
+    horizon_y: float
+    live: tuple[int, int, int, int]
+
+    @classmethod
+    def default(cls, size: tuple[int, int], reference_horizon: float) -> View:
+        """The whole frame with the horizon at the `reference_horizon` fraction of its height."""
+        return cls(size, reference_horizon * size[1], (0, 0, *size))
+
+
 def band_geometry(
-    band: Band, frame_size: tuple[int, int], patch: int
+    band: Band, view: View, patch: int, reference_horizon: float
 ) -> tuple[int, int, int, int, float]:
-    """(x0, y0, x1, y1) of the band in the frame and its scale (window px / patch px)."""
-    w, h = frame_size
-    window = band.window * h
+    """(x0, y0, x1, y1) of the band in the frame and its scale (window px / patch px).
+
+    A band's fractions are of the live height, its rows measured from the horizon (a band
+    tuned with the horizon at `reference_horizon` of the height): a car's size in pixels is
+    proportional to how far below the horizon it meets the road, whatever the lens, so a band
+    keeps its windows on the cars they fit when the horizon or the size changes."""
+    lx0, ly0, lx1, ly1 = view.live
+    lw, lh = lx1 - lx0, ly1 - ly0
+    window = band.window * lh
     scale = window / patch
-    y0 = round(band.top * h)
-    y1 = max(round(band.bottom * h), y0 + round(window))
-    x0, x1 = round(band.left * w), round(band.right * w)
-    y1 = min(y1, h)
+    y0 = max(round(view.horizon_y + (band.top - reference_horizon) * lh), ly0)
+    y1 = round(view.horizon_y + (band.bottom - reference_horizon) * lh)
+    y1 = min(max(y1, y0 + round(window)), ly1)
+    x0, x1 = lx0 + round(band.left * lw), lx0 + round(band.right * lw)
     return x0, y0, x1, y1, scale
 
 
-def search_band(frame: NDArray[np.uint8], band: Band, weights: LinearWeights) -> BandHits:
-    """Score every window of one band (HOG computed once for the band at its scale)."""
+def search_band(
+    frame: NDArray[np.uint8],
+    band: Band,
+    weights: LinearWeights,
+    view: View,
+    reference_horizon: float,
+) -> BandHits | None:
+    """Score every window of one band (HOG computed once for the band at its scale); None when
+    the band does not fit in the live picture."""
     cfg = weights.config
-    h, w = frame.shape[:2]
-    x0, y0, x1, y1, scale = band_geometry(band, (w, h), cfg.patch_size)
-    # A band may reach past the side edges so cars entering the frame are covered: pad by
-    # mirroring the frame there. A car cut by the edge and mirrored looks like a whole car (cars
+    x0, y0, x1, y1, scale = band_geometry(band, view, cfg.patch_size, reference_horizon)
+    if y1 - y0 < scale * cfg.patch_size * 0.99:
+        return None
+    # A band may reach past the live picture's sides so cars entering it are covered: pad by
+    # mirroring the picture there. A car cut by the edge and mirrored looks like a whole car (cars
     # are nearly symmetric); a smeared border column looks like nothing the classifier knows.
-    pad_left, pad_right = max(0, -x0), max(0, x1 - w)
-    crop = frame[y0:y1, max(0, x0) : min(w, x1)]
+    lx0, _, lx1, _ = view.live
+    pad_left, pad_right = max(0, lx0 - x0), max(0, x1 - lx1)
+    crop = frame[y0:y1, max(lx0, x0) : min(lx1, x1)]
     if pad_left or pad_right:
         crop = cv2.copyMakeBorder(crop, 0, 0, pad_left, pad_right, cv2.BORDER_REFLECT)
     size = (

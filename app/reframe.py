@@ -1,0 +1,196 @@
+"""Re-framed copies of a labelled clip, to measure roadview on cameras it was not tuned on.
+
+A framing crops the picture, pads it with black and resizes it: the horizon moves, the field of
+view narrows, the aspect ratio or the size changes, black bars appear. The same affine change is
+applied to the labels (boxes and lane points), so the scores of a re-framed clip are comparable
+with the original's.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from app.assembly import build_stages
+from app.drivers import process_video
+from app.evaluate import evaluate, load_labels_document
+from app.record import read_record
+from app.sinks import VideoSink
+from app.sources import Frame, probe_video, read_frames
+from camera_cal import Calibration, build_undistorter
+from vehicles.model import VehicleModel
+
+Box = tuple[int, int, int, int]
+
+
+@dataclass(frozen=True)
+class Framing:
+    """Crop `crop` (x0, y0, x1, y1 of the source; None: all), pad `pad` black pixels (left, top,
+    right, bottom), then resize to `size` (None: as it is)."""
+
+    name: str
+    crop: Box | None = None
+    pad: Box = (0, 0, 0, 0)
+    size: tuple[int, int] | None = None
+
+    def padded_size(self, source: tuple[int, int]) -> tuple[int, int]:
+        """(width, height) after the crop and the padding, before the resize."""
+        x0, y0, x1, y1 = self.crop or (0, 0, *source)
+        left, top, right, bottom = self.pad
+        return x1 - x0 + left + right, y1 - y0 + top + bottom
+
+    def output_size(self, source: tuple[int, int]) -> tuple[int, int]:
+        """(width, height) of the re-framed picture of a `source`-sized one."""
+        return self.size or self.padded_size(source)
+
+    def affine(self, source: tuple[int, int]) -> tuple[float, float, float, float]:
+        """(sx, sy, dx, dy): a source point (x, y) lands at (x sx + dx, y sy + dy)."""
+        x0, y0, _, _ = self.crop or (0, 0, *source)
+        pw, ph = self.padded_size(source)
+        ow, oh = self.output_size(source)
+        sx, sy = ow / pw, oh / ph
+        return sx, sy, (self.pad[0] - x0) * sx, (self.pad[1] - y0) * sy
+
+
+def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
+    """The framings of issue #15 for a `source`-sized clip: as it is, horizon 10 % of the height
+    higher (crop the top) and lower (pad the top, crop the bottom), a narrower field of view (the
+    middle 80 % enlarged back), a 4:3 crop, black side bars, and two other sizes."""
+    w, h = source
+    cut = round(0.1 * h)
+    side = round((w - h * 4 / 3) / 2)
+    narrow = (round(0.1 * w), round(0.1 * h), w - round(0.1 * w), h - round(0.1 * h))
+    return (
+        Framing("as is"),
+        Framing("horizon up", crop=(0, cut, w, h)),
+        Framing("horizon down", crop=(0, 0, w, h - cut), pad=(0, cut, 0, 0)),
+        Framing("narrower view", crop=narrow, size=(w, h)),
+        Framing("4:3 crop", crop=(side, 0, w - side, h)),
+        Framing("side bars", crop=(side, 0, w - side, h), pad=(side, 0, side, 0)),
+        Framing("960x540", size=(round(w * 0.75), round(h * 0.75))),
+        Framing("1920x1080", size=(round(w * 1.5), round(h * 1.5))),
+    )
+
+
+def reframe_image(frame: Frame, framing: Framing) -> Frame:
+    """The re-framed picture."""
+    h, w = frame.shape[:2]
+    x0, y0, x1, y1 = framing.crop or (0, 0, w, h)
+    out = frame[y0:y1, x0:x1]
+    if any(framing.pad):
+        left, top, right, bottom = framing.pad
+        out = cv2.copyMakeBorder(out, top, bottom, left, right, cv2.BORDER_CONSTANT, value=0)
+    if framing.size is not None and framing.size != (out.shape[1], out.shape[0]):
+        shrink = framing.size[0] < out.shape[1]
+        interpolation = cv2.INTER_AREA if shrink else cv2.INTER_LINEAR
+        out = cv2.resize(out, framing.size, interpolation=interpolation)
+    return np.ascontiguousarray(out)
+
+
+def reframe_labels(
+    document: dict[str, Any], framing: Framing, source: tuple[int, int]
+) -> dict[str, Any]:
+    """A labels document (the format of ../shared/data/README.md) moved with the picture:
+    boxes are clipped to what is still shown; a vehicle less than half shown is ignored, one
+    not shown at all dropped; lane points of rows no longer shown are dropped."""
+    sx, sy, dx, dy = framing.affine(source)
+    ow, oh = framing.output_size(source)
+    # What of the picture is real: not a black bar.
+    left, top, right, bottom = framing.pad
+    pw, ph = framing.padded_size(source)
+    shown = (left * sx, top * sy, (pw - right) * sx, (ph - bottom) * sy)
+    out = copy.deepcopy(document)
+    out["clip"] = f"{document.get('clip', 'clip')} ({framing.name})"
+    for frame in out.get("keyframes", {}).values():
+        vehicles = []
+        for vehicle in frame.get("vehicles", []):
+            x0, y0, x1, y1 = vehicle["box"]
+            box = [x0 * sx + dx, y0 * sy + dy, x1 * sx + dx, y1 * sy + dy]
+            clipped = [
+                max(box[0], shown[0]),
+                max(box[1], shown[1]),
+                min(box[2], shown[2]),
+                min(box[3], shown[3]),
+            ]
+            if clipped[2] <= clipped[0] or clipped[3] <= clipped[1]:
+                continue
+            area = (box[2] - box[0]) * (box[3] - box[1])
+            kept = (clipped[2] - clipped[0]) * (clipped[3] - clipped[1])
+            vehicle["box"] = [round(c, 1) for c in clipped]
+            vehicle["ignore"] = bool(vehicle.get("ignore", False)) or kept < 0.5 * area
+            vehicles.append(vehicle)
+        frame["vehicles"] = vehicles
+        lane = frame.get("lane") or {}
+        for side, points in lane.items():
+            moved = {}
+            for row, x in (points or {}).items():
+                y, nx = float(row) * sy + dy, float(x) * sx + dx
+                if shown[1] <= y < shown[3] and 0 <= y < oh and 0 <= nx < ow:
+                    moved[str(round(y))] = round(nx, 1)
+            lane[side] = moved
+    return out
+
+
+def write_reframed(
+    video: Path, framing: Framing, output: Path, calibration: Calibration | None
+) -> tuple[int, int]:
+    """`video` undistorted with `calibration` (the labels' frame) and re-framed, encoded to
+    `output`; its size."""
+    info = probe_video(video)
+    undistort = build_undistorter(calibration, info.size) if calibration else None
+    size = framing.output_size(info.size)
+    with VideoSink(output, size, info.fps) as sink:
+        for frame in read_frames(video, info):
+            sink.write(reframe_image(undistort(frame) if undistort else frame, framing))
+    return size
+
+
+def framing_scores(
+    video: Path,
+    labels: Path,
+    framing: Framing,
+    folder: Path,
+    calibration: Calibration | None,
+    classifier: VehicleModel | None = None,
+) -> dict[str, Any]:
+    """Scores of roadview (without calibration, as on an unknown camera) on the re-framed clip
+    against the labels moved the same way."""
+    source = probe_video(video).size
+    clip = folder / f"{video.stem}.mp4"
+    write_reframed(video, framing, clip, calibration)
+    document = reframe_labels(json.loads(labels.read_text()), framing, source)
+    record = folder / f"{video.stem}.jsonl"
+    lanes, vehicles = build_stages(classifier=classifier)
+    process_video(clip, None, None, lanes, vehicles, record=record, vehicles_in_worker=False)
+    truth = load_labels_document(document)
+    return evaluate(truth, list(read_record(record)))
+
+
+def pooled(scores: Iterable[Mapping[str, Any]], threshold: str = "iou_0.5") -> dict[str, float]:
+    """Vehicle precision, recall and mean IoU pooled over clips, and the lane's share within
+    20 px, from `evaluate` results."""
+    tp = fp = fn = 0
+    iou_sum = points = within = 0.0
+    for s in scores:
+        v = s["vehicles"][threshold]
+        tp, fp, fn = tp + v["true_positives"], fp + v["false_positives"], fn + v["false_negatives"]
+        iou_sum += v["mean_iou"] * v["true_positives"]
+        lane = s["lane"]
+        points += lane["points"]
+        within += (lane["share_within_20px"] or 0.0) * lane["points"]
+    return {
+        "precision": tp / (tp + fp) if tp + fp else 1.0,
+        "recall": tp / (tp + fn) if tp + fn else 1.0,
+        "mean_iou": iou_sum / tp if tp else 0.0,
+        "lane_within_20px": within / points if points else 0.0,
+        "true_positives": tp,
+        "false_positives": fp,
+        "false_negatives": fn,
+    }
