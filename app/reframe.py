@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import copy
 import json
-from collections.abc import Iterable, Mapping
+import tempfile
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -194,3 +195,23 @@ def pooled(scores: Iterable[Mapping[str, Any]], threshold: str = "iou_0.5") -> d
         "false_positives": fp,
         "false_negatives": fn,
     }
+
+
+def framing_table(
+    clips: Sequence[tuple[Path, Path]],
+    calibration: Calibration | None,
+    framings: Sequence[Framing] | None = None,
+    classifier: VehicleModel | None = None,
+) -> dict[str, dict[str, float]]:
+    """Pooled scores per framing over `clips` ((video, labels) pairs of one size): the table
+    that shows whether roadview holds on footage framed unlike the clips it was tuned on."""
+    source = probe_video(clips[0][0]).size
+    table = {}
+    for framing in framings or standard_framings(source):
+        with tempfile.TemporaryDirectory() as tmp:
+            scores = [
+                framing_scores(video, labels, framing, Path(tmp), calibration, classifier)
+                for video, labels in clips
+            ]
+        table[framing.name] = pooled(scores)
+    return table

@@ -19,6 +19,7 @@ import numpy as np
 from app.annotators import compose, default_annotators
 from app.assembly import build_stages
 from app.pipeline import Pipeline
+from app.reframe import framing_table
 from app.runtime import tune_process
 from app.sinks import VideoWriter
 from app.sources import probe_video, read_frames
@@ -320,6 +321,15 @@ def main() -> None:
         f"per-window {naive['naive_ms']:.0f} ms ({naive['windows']} windows): "
         f"{naive['speedup']:.0f}x"
     )
+    calibration = load_calibration(default_calibration_path())
+    clips = [(clip, args.data / "labels" / f"{clip.stem}.json") for clip in _clip_paths(args.data)]
+    report["framings"] = framing_table(clips, calibration)
+    print("quality on re-framed clips (pooled over the three, IoU 0.5, --calibration none):")
+    for name, row in report["framings"].items():
+        print(
+            f"  {name:14s} precision {row['precision']:.3f}  recall {row['recall']:.3f}  "
+            f"mean IoU {row['mean_iou']:.3f}  lane within 20 px {row['lane_within_20px']:.3f}"
+        )
     report["patch_features_ms"] = patch_feature_ms(args.data)
     print(f"features of one 64x64 patch: {report['patch_features_ms']:.3f} ms")
     if not args.no_train:

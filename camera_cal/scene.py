@@ -105,8 +105,8 @@ class SceneTracker:
     bars) and the recent vanishing points (for the horizon).
 
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
-    `fixed_horizon` is set (the user's `--horizon`). The horizon is measured every `every` frames
-    (it changes slowly; each measurement costs a few milliseconds).
+    `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
+    then, and every `every` frames after (it changes slowly; each costs a few milliseconds).
     """
 
     def __init__(
@@ -147,8 +147,10 @@ class SceneTracker:
         # Bars: sample every 4th row and column (bars are wide; this costs ~1 ms).
         np.maximum(self._row_max, grey[:, ::4].max(axis=1), out=self._row_max)
         np.maximum(self._col_max, grey[::4].max(axis=0), out=self._col_max)
-        live = self._box() if self._count % self.every == 0 else self._current.live
-        if self.fixed_horizon is None and self._count % self.every == 0:
+        # Every frame until the first estimate stands (the stages wait for it), then every few.
+        due = self._count % self.every == 0 or len(self._estimates) < self.min_estimates
+        live = self._box() if due else self._current.live
+        if self.fixed_horizon is None and due:
             self._measure(grey, live)
         self._count += 1
         if self.fixed_horizon is not None:

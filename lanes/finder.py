@@ -220,11 +220,13 @@ class LaneFinder:
             left = right - np.array([0.0, 0.0, lane_px])
         if right is None:
             right = left + np.array([0.0, 0.0, lane_px])
-        w, h = view.frame_size
-        frame_rows = np.linspace(h - 1, cfg.src_top_y * h, cfg.polyline_points)
-        bird_rows = view.to_birdseye(np.stack([np.full_like(frame_rows, w / 2), frame_rows], 1))[
-            :, 1
-        ]
+        # From the live picture's bottom up to the trapezoid's top row (where the warp is sure).
+        lx0, _, lx1, ly1 = view.live
+        middle = (lx0 + lx1) / 2
+        top = float(view.to_frame(np.array([[bw / 2, 0.0]]))[0, 1])
+        frame_rows = np.linspace(ly1 - 1, top, cfg.polyline_points)
+        bird_rows = view.to_birdseye(np.stack([np.full_like(frame_rows, middle), frame_rows], 1))
+        bird_rows = bird_rows[:, 1]
         polylines = []
         for fit in (left, right):
             pts = np.stack([evaluate_fit(fit, bird_rows), bird_rows], axis=1)
@@ -237,7 +239,9 @@ class LaneFinder:
         curvature = float(np.mean([1.0 / r for r in radii]))
         # Past straight_radius_m a radius cannot be told from a straight road: infinite.
         radius = 1.0 / curvature if curvature * cfg.straight_radius_m > 1.0 else math.inf
-        centre_px = float(view.to_birdseye(np.array([[w / 2, cfg.src_bottom_y * h]]))[0, 0])
+        # The camera sits at the middle of the live picture; the warp's bottom row is nearest.
+        bottom = float(view.to_frame(np.array([[bw / 2, float(bh)]]))[0, 1])
+        centre_px = float(view.to_birdseye(np.array([[middle, bottom]]))[0, 0])
         offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
         return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right, width)

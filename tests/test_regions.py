@@ -66,5 +66,5 @@ def test_clipped_boxes_stay_in_the_frame() -> None:
     dets = Detections.from_boxes(
         np.array([[-5.0, 10, 50, 60], [1200, 600, 1290, 730]]), np.array([0.9, 0.8])
     )
-    boxes = dets.clipped((1280, 720)).boxes
+    boxes = dets.clipped((0, 0, 1280, 720)).boxes
     assert boxes.tolist() == [[0, 10, 50, 60], [1200, 600, 1280, 720]]

@@ -214,7 +214,7 @@ def test_track_follows_a_fast_car_and_drops_it_when_it_leaves() -> None:
         x = 900 - 25 * frame
         truth = np.array([[x, 420, x + 70, 460]], float)
         seen = truth if x + 70 > 0 else np.zeros((0, 4))
-        shown = tracker.update(Detections.from_boxes(seen, np.ones(len(seen))), (1280, 720))
+        shown = tracker.update(Detections.from_boxes(seen, np.ones(len(seen))), (0, 0, 1280, 720))
         if 10 <= frame <= 30:
             assert len(shown) == 1 and shown.ids[0] == 1
             assert iou(shown.boxes[0], truth[0]) > 0.8  # on the car, not trailing behind it

@@ -37,10 +37,11 @@ class Detections:
     def __len__(self) -> int:
         return len(self.scores)
 
-    def clipped(self, frame_size: tuple[int, int]) -> Detections:
-        """The same detections with boxes cut to a frame of (width, height)."""
-        width, height = frame_size
-        boxes = np.clip(self.boxes, 0.0, [width, height, width, height])
+    def clipped(self, region: tuple[float, float, float, float]) -> Detections:
+        """The same detections with boxes cut to `region` (x0, y0, x1, y1: the frame, or the
+        live picture inside black bars)."""
+        x0, y0, x1, y1 = region
+        boxes = np.clip(self.boxes, [x0, y0, x0, y0], [x1, y1, x1, y1])
         return Detections(boxes, self.scores, self.ids)
 
 
@@ -68,7 +69,9 @@ def iou_matrix(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.flo
     return np.asarray(inter / np.maximum(union, 1e-9))
 
 
-def inside_share(boxes: NDArray[np.float64], frame_size: tuple[int, int]) -> NDArray[np.float64]:
-    """Share of each box's area that lies inside a frame of (width, height)."""
-    frame = np.array([[0.0, 0.0, *frame_size]])
+def inside_share(
+    boxes: NDArray[np.float64], region: tuple[float, float, float, float]
+) -> NDArray[np.float64]:
+    """Share of each box's area that lies inside `region` (x0, y0, x1, y1)."""
+    frame = np.array([region], np.float64)
     return np.asarray(_intersection(boxes, frame)[:, 0] / np.maximum(_area(boxes), 1e-9))

@@ -63,12 +63,14 @@ class VehicleDetector:
         # Region boxes come from heat averaged over the recent frames: centred that far back.
         self.tracker = Tracker(self.config.track, lag=(self.config.heat.recent - 1) / 2)
         self.frame_index = 0
+        self._view: View | None = None
 
     def reset(self) -> None:
         """Forget heat and tracks."""
         self.heatmap.reset()
         self.tracker.reset()
         self.frame_index = 0
+        self._view = None
 
     def view(
         self,
@@ -76,13 +78,22 @@ class VehicleDetector:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
     ) -> View:
-        """Where to search frames of `size`: the given horizon and live box, or the defaults."""
+        """Where to search frames of `size`: the given horizon and live box, or the defaults.
+        The bands stay where they are while the scene moves less than `horizon_tolerance` of
+        the height (the estimate wobbles; the bands are tolerant)."""
         default = View.default(size, self.config.reference_horizon)
-        return View(
+        wanted = View(
             size,
             default.horizon_y if horizon_y is None else horizon_y,
             default.live if live is None else live,
         )
+        current = self._view if self._view is not None and self._view.size == size else default
+        tolerance = self.config.horizon_tolerance * size[1]
+        moved = abs(wanted.horizon_y - current.horizon_y) > tolerance or any(
+            abs(a - b) > tolerance for a, b in zip(wanted.live, current.live, strict=True)
+        )
+        self._view = wanted if moved else current
+        return self._view
 
     def search(
         self, frame: NDArray[np.uint8], parity: int | None = None, view: View | None = None
@@ -121,15 +132,23 @@ class VehicleDetector:
         strong = proba >= cfg.min_probability
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
-        frame_heat = self.heatmap.add((w, h), footprint(boxes[strong], cfg.heat_footprint), weight)
+        # Heat is kept over the live picture alone: windows reaching past its sides pile their
+        # heat at its edge, as at a frame's edge, not into a black bar.
+        lx0, ly0, lx1, ly1 = view.live
+        offset = np.array([lx0, ly0, lx0, ly0], np.float64)
+        heated = footprint(boxes[strong], cfg.heat_footprint) - offset
+        frame_heat = self.heatmap.add((lx1 - lx0, ly1 - ly0), heated, weight)
         region_boxes, peaks = self.heatmap.regions()
+        region_boxes = region_boxes + offset
         big = np.minimum(
             region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
         ) >= cfg.min_box * (view.live[3] - view.live[1])
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
-        # Tracks may reach past the frame's side (a car leaving); what is shown stays inside it.
-        shown = self.tracker.update(regions, (w, h)).clipped((w, h))
+        # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
+        x0, y0, x1, y1 = view.live
+        picture = (float(x0), float(y0), float(x1), float(y1))
+        shown = self.tracker.update(regions, picture).clipped(picture)
         debug = (
             VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold)
             if self.keep_debug

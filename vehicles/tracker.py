@@ -49,15 +49,15 @@ class Tracker:
         self._next_id = 1
 
     def update(
-        self, detections: Detections, frame_size: tuple[int, int] | None = None
+        self, detections: Detections, region: tuple[float, float, float, float] | None = None
     ) -> Detections:
         """Fold in one frame's detections; return the confirmed, shown tracks.
 
         A measured box is taken to show the vehicle `lag` frames ago (heat averaged over recent
         frames), so it is moved on by `lag` times the track's velocity before it corrects the track.
         Ids count shown vehicles only (1, 2, 3, ...): a candidate never confirmed uses none. With
-        `frame_size`, a track whose predicted box has left the frame (less than `min_inside` of it
-        inside) is dropped at once instead of lingering at the edge.
+        `region` (the frame or its live picture, x0, y0, x1, y1), a track whose predicted box has
+        left it (less than `min_inside` of it inside) is dropped at once instead of lingering.
         """
         cfg = self.config
         boxes = detections.boxes
@@ -81,8 +81,8 @@ class Tracker:
                 track.box = predicted[r]  # coast on the last velocity
                 track.missed += 1
         keep = [t.missed <= cfg.max_missed for t in self.tracks]
-        if frame_size is not None and self.tracks:
-            share = inside_share(np.array([t.box for t in self.tracks]), frame_size)
+        if region is not None and self.tracks:
+            share = inside_share(np.array([t.box for t in self.tracks]), region)
             keep = [k and s >= cfg.min_inside for k, s in zip(keep, share, strict=True)]
         self.tracks = [t for t, k in zip(self.tracks, keep, strict=True) if k]
         for c in sorted(set(range(len(boxes))) - set(matched.values())):

@@ -1,0 +1,95 @@
+"""Re-framed clips and labels: the picture and its labels move together, and roadview holds on
+framings of the labelled clips it was not tuned on (horizon moved, bars, another size)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app.reframe import Framing, framing_table, reframe_image, reframe_labels, standard_framings
+from camera_cal import default_calibration_path, load_calibration
+
+# What holds today, pooled over the three clips (see the README's table). The issue's aim is
+# precision >= 0.95 and mean IoU >= 0.75: not reached yet on every framing (#15 stays open).
+PRECISION = 0.85
+RECALL_DROP = 0.05
+MEAN_IOU = 0.65
+LANE_WITHIN = 0.99
+
+
+def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
+    return {
+        "clip": "synthetic",
+        "frames": 1,
+        "keyframes": {"0": {"vehicles": [{"id": 1, "box": box}], "lane": {"left": lane}}},
+    }
+
+
+@pytest.mark.parametrize("framing", standard_framings((1280, 720)), ids=lambda f: f.name)
+def test_labels_move_with_the_picture(framing: Framing) -> None:
+    """A white box and a white lane dot drawn where the labels say are found, after re-framing
+    the picture, where the re-framed labels say (within a pixel and a half)."""
+    frame = np.zeros((720, 1280, 3), np.uint8)
+    box = [500, 400, 700, 520]
+    frame[400:520, 500:700] = 255
+    frame[596:605, 376:385] = 255  # the lane point (380, 600)
+    moved = reframe_image(frame, framing)
+    labels = reframe_labels(_labels(box, {"600": 380}), framing, (1280, 720))
+    keyframe = labels["keyframes"]["0"]
+    assert moved.shape[:2][::-1] == framing.output_size((1280, 720))
+    (vehicle,) = keyframe["vehicles"]
+    white = np.argwhere(moved[..., 0] > 127)
+    top_part = white[white[:, 0] < min(int(vehicle["box"][3]) + 2, moved.shape[0])]
+    ys, xs = top_part[:, 0], top_part[:, 1]
+    in_box = (xs < vehicle["box"][2] + 2) & (ys < vehicle["box"][3] + 2)
+    found = [xs[in_box].min(), ys[in_box].min(), xs[in_box].max() + 1, ys[in_box].max() + 1]
+    np.testing.assert_allclose(found, vehicle["box"], atol=1.5)
+    (row, x), *_ = keyframe["lane"]["left"].items()
+    assert moved[int(row), round(x)].max() > 127
+    assert not vehicle["ignore"]
+
+
+def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
+    framing = Framing("right half", crop=(640, 0, 1280, 720))
+    labels = reframe_labels(
+        {
+            "keyframes": {
+                "0": {
+                    "vehicles": [
+                        {"id": 1, "box": [560, 400, 700, 480]},  # 60 of 140 px still shown
+                        {"id": 2, "box": [100, 400, 300, 480]},  # gone
+                        {"id": 3, "box": [800, 400, 900, 480]},
+                    ]
+                }
+            }
+        },
+        framing,
+        (1280, 720),
+    )
+    vehicles = {v["id"]: v for v in labels["keyframes"]["0"]["vehicles"]}
+    assert set(vehicles) == {1, 3}
+    assert vehicles[1]["box"] == [0, 400, 60, 480] and vehicles[1]["ignore"]
+    assert vehicles[3]["box"] == [160, 400, 260, 480] and not vehicles[3]["ignore"]
+
+
+@pytest.mark.slow
+def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
+    """The labelled clips re-framed (horizon 10 % up and down, 4:3, black side bars) and run
+    without calibration, as footage of an unknown camera: pooled over the three clips, the
+    vehicles and the lane stay close to the clips as they are."""
+    clips = [
+        (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
+        for c in ("test_video", "project_cut_1", "project_cut_2")
+    ]
+    framings = {f.name: f for f in standard_framings((1280, 720))}
+    chosen = [framings[n] for n in ("as is", "horizon up", "horizon down", "4:3 crop", "side bars")]
+    table = framing_table(clips, load_calibration(default_calibration_path()), chosen)
+    plain = table.pop("as is")
+    for name, row in table.items():
+        assert row["precision"] >= PRECISION, (name, row)
+        assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
+        assert row["mean_iou"] >= MEAN_IOU, (name, row)
+        assert row["lane_within_20px"] >= LANE_WITHIN, (name, row)
