@@ -7,11 +7,11 @@ shift between consecutive views (phase correlation of their lightness) is the di
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Iterable
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import trim_mean
 
 NEAR_PART = 0.6  # the nearest 60 % of the view: road surface, rarely a vehicle
 
@@ -33,6 +33,14 @@ def road_shift(
     window = cv2.createHanningWindow((current.shape[1], current.shape[0]), cv2.CV_32F)
     (_, dy), response = cv2.phaseCorrelate(previous, current, window)
     return float(dy) if response >= min_response else None
+
+
+def trimmed_mean(values: Iterable[float], cut: float) -> float:
+    """Mean of the values left after dropping the `cut` share at each end (as
+    scipy.stats.trim_mean; numpy alone keeps scipy off the frame path)."""
+    ordered = np.sort(np.fromiter(values, np.float64))
+    drop = int(cut * len(ordered))
+    return float(ordered[drop : len(ordered) - drop].mean())
 
 
 class RoadMotion:
@@ -60,4 +68,4 @@ class RoadMotion:
             if shift is not None:
                 self.recent.append(shift * ym_per_px)
         self._previous = near
-        return float(trim_mean(self.recent, 0.2)) if self.recent else None
+        return trimmed_mean(self.recent, 0.2) if self.recent else None

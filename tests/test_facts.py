@@ -194,3 +194,14 @@ def test_facts_in_the_record_follow_the_schema(test_video: Path, tmp_path: Path)
     for row in process_clip(test_video, tmp_path, "--end", "0.6"):
         jsonschema.validate(row, schema)
         assert "speed_kmh" in row and "headway_s" in row and "ttc_s" in row
+
+
+def test_trimmed_mean_equals_scipy() -> None:
+    from scipy.stats import trim_mean
+
+    from lanes.motion import trimmed_mean
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 5, 14, 15):
+        values = rng.normal(8.0, 1.0, n)
+        assert trimmed_mean(values, 0.2) == pytest.approx(trim_mean(values, 0.2))
