@@ -89,7 +89,8 @@ def birdseye_for(
     apex = _apex(reference)
     horizon = ly0 + apex[1] if horizon_y is None else horizon_y
     bottom = ly0 + config.src_bottom_y * lh
-    scale = (bottom - horizon) / (config.src_bottom_y * lh - apex[1])
+    # (A horizon given near the bottom still leaves a fifth of the tuned trapezoid's height.)
+    scale = max((bottom - horizon) / (config.src_bottom_y * lh - apex[1]), 0.2)
     centre = (lx0 + lx1) / 2 + apex[0] - ref_w / 2
     src = np.array([centre, horizon]) + scale * (reference - apex)
     bw, bh = round(ref_w * config.warp_width), round(lh * config.warp_height)
