@@ -58,6 +58,7 @@ class _Started:
 
     undistorted: Frame
     scene: SceneGeometry
+    placement: dict[str, Any]  # the scene as the stages take it (see SceneTracker.placement)
     lane: LaneResult | None
     timings: dict[str, float]
 
@@ -175,14 +176,16 @@ class Pipeline:
         t0 = time.perf_counter()
         scene = self._scene.update(undistorted)
         timings["scene"] = (time.perf_counter() - t0) * 1000
+        horizon_y, live = self._scene.placement
+        placement: dict[str, Any] = {"horizon_y": horizon_y, "live": live}
         if self._worker is not None:
-            self._worker.submit(undistorted, **_stage_scene(scene))
+            self._worker.submit(undistorted, **placement)
         lane = None
         if self.lanes is not None:
             t0 = time.perf_counter()
-            lane = self.lanes.process(undistorted, **_stage_scene(scene))
+            lane = self.lanes.process(undistorted, **placement)
             timings["lanes"] = (time.perf_counter() - t0) * 1000
-        return _Started(undistorted, scene, lane, timings)
+        return _Started(undistorted, scene, placement, lane, timings)
 
     def _finish(self, started: _Started) -> FrameOutput:
         """Add the vehicles (from the worker, or run here) to the frame's result."""
@@ -194,7 +197,7 @@ class Pipeline:
             vehicles = found
         elif self.vehicles is not None:
             t0 = time.perf_counter()
-            vehicles = self.vehicles.process(undistorted, **_stage_scene(started.scene))
+            vehicles = self.vehicles.process(undistorted, **started.placement)
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
         facts = None
         # Metres follow the lane stage's warp, which follows the scene.
@@ -229,8 +232,3 @@ class Pipeline:
         self._frame += 1
         result = FrameResult(lane, vehicles, facts, events, started.scene, timings)
         return FrameOutput(undistorted, result)
-
-
-def _stage_scene(scene: SceneGeometry) -> dict[str, Any]:
-    """The scene as the stages take it: plain values (they do not import camera_cal)."""
-    return {"horizon_y": scene.horizon_y, "live": scene.live}

@@ -117,12 +117,14 @@ class SceneTracker:
         window: int = 60,
         min_estimates: int = 5,
         every: int = 3,
+        settle: float = 0.015,
     ) -> None:
         self.size = size
         self.default_horizon = default_horizon
         self.fixed_horizon = fixed_horizon
         self.min_estimates = min_estimates
         self.every = every
+        self.settle = settle
         self._estimates: deque[float] = deque(maxlen=window)
         self._row_max = np.zeros(size[1], np.uint8)
         self._col_max = np.zeros(size[0], np.uint8)
@@ -130,6 +132,7 @@ class SceneTracker:
         self._current = SceneGeometry(
             size, fixed_horizon if fixed_horizon is not None else default_horizon, self._box()
         )
+        self._placed = (self._current.horizon_y, self._current.live)
 
     def _box(self) -> Box:
         if not self._count:
@@ -160,7 +163,21 @@ class SceneTracker:
         else:
             horizon, estimated = self.default_horizon, False
         self._current = SceneGeometry(self.size, horizon, live, estimated)
+        tolerance = self.settle * self.size[1]
+        placed_horizon, placed_live = self._placed
+        moved = abs(horizon - placed_horizon) > tolerance or any(
+            abs(a - b) > tolerance for a, b in zip(live, placed_live, strict=True)
+        )
+        if moved:
+            self._placed = (horizon, live)
         return self._current
+
+    @property
+    def placement(self) -> tuple[float, Box]:
+        """The horizon and live box as the stages place their work by: they follow the
+        estimate in steps of more than `settle` of the height, so its wobble neither restarts
+        the lanes' history nor moves the vehicle bands."""
+        return self._placed
 
     def _measure(self, grey: NDArray[np.uint8], live: Box) -> None:
         """Add this frame's vanishing point row, when the road's edges give one (measured at

@@ -24,9 +24,6 @@ class LaneConfig:
     dst_right_x: float = 0.7
     # World scale: a US lane is 3.7 m wide; dashes are 3 m long (sets metres per warped row).
     lane_width_m: float = 3.7
-    # The warp follows the scene's horizon once it moved more than this share of the height
-    # (each new warp restarts the lines' history; the estimate wobbles by less).
-    rewarp: float = 0.015
     warp_length_m: float = 27.0  # road length covered by the trapezoid, from the 3 m dashes
     # Thresholds on the bird's-eye image (LAB channels, 0..255).
     line_width_m: float = 0.15

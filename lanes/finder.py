@@ -85,18 +85,16 @@ class LaneFinder:
         live: tuple[int, int, int, int] | None = None,
     ) -> BirdsEye:
         """The bird's-eye warp for this frame size and scene (the config's horizon and the whole
-        frame when not given). Kept while the scene stays within `rewarp` of it: a new warp
-        starts the lines' history afresh."""
+        frame when not given), kept while they stay the same (the app passes a scene that moves
+        in steps): a new warp starts the lines' history afresh."""
         current = self._view
-        if current is not None and current.frame_size == frame_size:
-            tolerance = self.config.rewarp * frame_size[1]
-            moved = horizon_y is not None and abs(horizon_y - current.horizon_y) > tolerance
-            if live is not None:
-                moved |= (
-                    max(abs(a - b) for a, b in zip(live, current.live, strict=True)) > tolerance
-                )
-            if not moved:
-                return current
+        if (
+            current is not None
+            and current.frame_size == frame_size
+            and horizon_y in (None, current.horizon_y)
+            and live in (None, current.live)
+        ):
+            return current
         self._view = birdseye_for(frame_size, self.config, horizon_y, live)
         if current is not None:
             self.reset()

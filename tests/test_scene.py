@@ -104,3 +104,20 @@ def test_horizon_in_the_record_and_the_override(test_video: Path, tmp_path: Path
         run_cli("process", test_video, "-o", tmp_path / "x.mp4", "--horizon", "720"),
         "--horizon 720 is outside the frame (720 rows)",
     )
+
+
+def test_the_stages_placement_follows_the_scene_in_steps() -> None:
+    """The placement jumps to the estimate once it is far from the default, then ignores a
+    wobble smaller than 1.5 % of the height and follows a larger move."""
+    size = (960, 540)
+    tracker = SceneTracker(size, default_horizon=300.0, every=1, window=5, min_estimates=3)
+    for _ in range(6):
+        tracker.update(_road(size, (500.0, 260.0), bars=80))
+    horizon, live = tracker.placement
+    assert abs(horizon - 260) < 4 and live == (80, 0, 880, 540)
+    for _ in range(6):
+        tracker.update(_road(size, (500.0, 264.0), bars=80))  # 4 px: within 8.1 px
+    assert tracker.placement[0] == horizon and tracker.current.horizon_y > horizon + 2
+    for _ in range(6):
+        tracker.update(_road(size, (500.0, 290.0), bars=80))
+    assert abs(tracker.placement[0] - 290) < 4

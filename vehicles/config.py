@@ -68,7 +68,6 @@ class DetectorConfig:
     # The bands were placed for the horizon at this fraction of the height (the shipped camera's
     # 420.8 of 720 rows); with another horizon they move with it.
     reference_horizon: float = 420.8 / 720
-    horizon_tolerance: float = 0.015  # bands move once the horizon moved this share of the height
     min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
     # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
     # training crops are wider than the car is tall, with road showing below it.

@@ -63,14 +63,12 @@ class VehicleDetector:
         # Region boxes come from heat averaged over the recent frames: centred that far back.
         self.tracker = Tracker(self.config.track, lag=(self.config.heat.recent - 1) / 2)
         self.frame_index = 0
-        self._view: View | None = None
 
     def reset(self) -> None:
         """Forget heat and tracks."""
         self.heatmap.reset()
         self.tracker.reset()
         self.frame_index = 0
-        self._view = None
 
     def view(
         self,
@@ -78,22 +76,13 @@ class VehicleDetector:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
     ) -> View:
-        """Where to search frames of `size`: the given horizon and live box, or the defaults.
-        The bands stay where they are while the scene moves less than `horizon_tolerance` of
-        the height (the estimate wobbles; the bands are tolerant)."""
+        """Where to search frames of `size`: the given horizon and live box, or the defaults."""
         default = View.default(size, self.config.reference_horizon)
-        wanted = View(
+        return View(
             size,
             default.horizon_y if horizon_y is None else horizon_y,
             default.live if live is None else live,
         )
-        current = self._view if self._view is not None and self._view.size == size else default
-        tolerance = self.config.horizon_tolerance * size[1]
-        moved = abs(wanted.horizon_y - current.horizon_y) > tolerance or any(
-            abs(a - b) > tolerance for a, b in zip(wanted.live, current.live, strict=True)
-        )
-        self._view = wanted if moved else current
-        return self._view
 
     def search(
         self, frame: NDArray[np.uint8], parity: int | None = None, view: View | None = None
