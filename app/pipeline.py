@@ -176,8 +176,7 @@ class Pipeline:
         t0 = time.perf_counter()
         scene = self._scene.update(undistorted)
         timings["scene"] = (time.perf_counter() - t0) * 1000
-        horizon_y, live = self._scene.placement
-        placement: dict[str, Any] = {"horizon_y": horizon_y, "live": live}
+        placement = self._scene.placement
         if self._worker is not None:
             self._worker.submit(undistorted, **placement)
         lane = None

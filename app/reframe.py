@@ -18,6 +18,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
 from app.assembly import build_stages
 from app.drivers import process_video
@@ -26,6 +27,7 @@ from app.record import read_record
 from app.sinks import VideoSink
 from app.sources import Frame, probe_video, read_frames
 from camera_cal import Calibration, build_undistorter
+from vehicles.detections import iou_matrix
 from vehicles.model import VehicleModel
 
 Box = tuple[int, int, int, int]
@@ -171,7 +173,36 @@ def framing_scores(
     lanes, vehicles = build_stages(classifier=classifier)
     process_video(clip, None, None, lanes, vehicles, record=record, vehicles_in_worker=False)
     truth = load_labels_document(document)
-    return evaluate(truth, list(read_record(record)))
+    frames = list(read_record(record))
+    return {**evaluate(truth, frames), "frames": frames}
+
+
+def distance_ratios(
+    reference: Sequence[Mapping[str, Any]],
+    frames: Sequence[Mapping[str, Any]],
+    framing: Framing,
+    source: tuple[int, int],
+    min_iou: float = 0.5,
+) -> NDArray[np.float64]:
+    """Per vehicle and frame, its distance in the re-framed clip's record `frames` over the
+    same vehicle's in the `reference` record of the clip as it is (boxes matched at `min_iou`
+    once moved back to the source picture): 1 where the geometry holds under the re-framing."""
+    sx, sy, dx, dy = framing.affine(source)
+    back = np.array([sx, sy, sx, sy]), np.array([dx, dy, dx, dy])
+    by_frame = {int(r["frame"]): r for r in reference}
+    ratios: list[float] = []
+    for record in frames:
+        seen = list(by_frame.get(int(record["frame"]), {}).get("vehicles", []))
+        framed = [v for v in record.get("vehicles", []) if v.get("distance_m")]
+        if not seen or not framed:
+            continue
+        a = (np.array([v["box"] for v in framed], np.float64) - back[1]) / back[0]
+        b = np.array([v["box"] for v in seen], np.float64)
+        overlap = iou_matrix(a, b)
+        for i, j in enumerate(overlap.argmax(axis=1)):
+            if overlap[i, j] >= min_iou and seen[j].get("distance_m"):
+                ratios.append(framed[i]["distance_m"] / seen[j]["distance_m"])
+    return np.asarray(ratios, np.float64)
 
 
 def pooled(scores: Iterable[Mapping[str, Any]], threshold: str = "iou_0.5") -> dict[str, float]:
@@ -204,9 +235,12 @@ def framing_table(
     classifier: VehicleModel | None = None,
 ) -> dict[str, dict[str, float]]:
     """Pooled scores per framing over `clips` ((video, labels) pairs of one size): the table
-    that shows whether roadview holds on footage framed unlike the clips it was tuned on."""
+    that shows whether roadview holds on footage framed unlike the clips it was tuned on. With
+    "as is" first, each other framing also gets the median ratio of its vehicles' distances to
+    the same vehicles' as they are."""
     source = probe_video(clips[0][0]).size
-    table = {}
+    table: dict[str, dict[str, float]] = {}
+    plain: list[Sequence[Mapping[str, Any]]] = []
     for framing in framings or standard_framings(source):
         with tempfile.TemporaryDirectory() as tmp:
             scores = [
@@ -214,4 +248,17 @@ def framing_table(
                 for video, labels in clips
             ]
         table[framing.name] = pooled(scores)
+        if framing == Framing("as is"):
+            plain = [s["frames"] for s in scores]
+        elif plain:
+            ratios = np.concatenate(
+                [
+                    distance_ratios(reference, s["frames"], framing, source)
+                    for reference, s in zip(plain, scores, strict=True)
+                ]
+            )
+            # How far the distances moved with the framing (1 = not at all): the median ratio.
+            table[framing.name]["distance_ratio"] = (
+                float(np.median(ratios)) if len(ratios) else float("nan")
+            )
     return table

@@ -12,13 +12,15 @@ class FrameStage(Protocol):
     """A stage sees every undistorted RGB frame in order and may keep history between frames.
 
     `process` also takes the scene as plain values (the horizon row, the live box inside black
-    bars): the stages do not import the scene module, nor each other."""
+    bars, the height its tuned fractions are of): the stages do not import the scene module,
+    nor each other."""
 
     def process(
         self,
         frame: NDArray[np.uint8],
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
+        scale_height: float | None = None,
     ) -> object:
         """Analyse one frame; history classes update here."""
         ...

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -38,6 +39,17 @@ class SceneGeometry:
         """Lateral pixels per metre of the road at frame rows `rows` (0 at or above the horizon)."""
         below = np.asarray(rows, np.float64) - self.horizon_y
         return np.maximum(below, 0.0) / self.camera_height_m
+
+
+def scale_height(live_size: tuple[int, int]) -> float:
+    """The height of the 16:9 picture a live box of `live_size` (width, height) is taken to be
+    cut from: its longer side spans the 16:9 width or its shorter side the height, whichever
+    gives more. A flat road does not reveal the focal length, so without a calibration the lens
+    is taken as the tuned one: cropped at the top, bottom or sides, scaled or padded, the
+    pictures then keep the tuned scale (another lens scales distances by the focal lengths'
+    ratio)."""
+    long_side, short_side = max(live_size), min(live_size)
+    return float(max(long_side * 9 / 16, short_side))
 
 
 def live_box(row_max: NDArray[np.uint8], col_max: NDArray[np.uint8], dark: int = 24) -> Box:
@@ -173,11 +185,16 @@ class SceneTracker:
         return self._current
 
     @property
-    def placement(self) -> tuple[float, Box]:
-        """The horizon and live box as the stages place their work by: they follow the
-        estimate in steps of more than `settle` of the height, so its wobble neither restarts
-        the lanes' history nor moves the vehicle bands."""
-        return self._placed
+    def placement(self) -> dict[str, Any]:
+        """The horizon, live box and scale height as the stages place their work by (their
+        `process` keywords): they follow the estimate in steps of more than `settle` of the
+        height, so its wobble neither restarts the lanes' history nor moves the vehicle bands."""
+        horizon, (x0, y0, x1, y1) = self._placed
+        return {
+            "horizon_y": horizon,
+            "live": (x0, y0, x1, y1),
+            "scale_height": scale_height((x1 - x0, y1 - y0)),
+        }
 
     def _measure(self, grey: NDArray[np.uint8], live: Box) -> None:
         """Add this frame's vanishing point row, when the road's edges give one (measured at

@@ -83,19 +83,21 @@ class LaneFinder:
         frame_size: tuple[int, int],
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
+        scale_height: float | None = None,
     ) -> BirdsEye:
-        """The bird's-eye warp for this frame size and scene (the config's horizon and the whole
-        frame when not given), kept while they stay the same (the app passes a scene that moves
-        in steps): a new warp starts the lines' history afresh."""
+        """The bird's-eye warp for this frame size and scene (the config's horizon, the whole
+        frame and its height when not given), kept while they stay the same (the app passes a
+        scene that moves in steps): a new warp starts the lines' history afresh."""
         current = self._view
         if (
             current is not None
             and current.frame_size == frame_size
             and horizon_y in (None, current.horizon_y)
             and live in (None, current.live)
+            and scale_height in (None, current.scale_height)
         ):
             return current
-        self._view = birdseye_for(frame_size, self.config, horizon_y, live)
+        self._view = birdseye_for(frame_size, self.config, horizon_y, live, scale_height)
         if current is not None:
             self.reset()
         return self._view
@@ -110,11 +112,12 @@ class LaneFinder:
         frame: NDArray[np.uint8],
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
+        scale_height: float | None = None,
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
-        from the scene's `horizon_y` and `live` box when given)."""
+        from the scene's `horizon_y`, `live` box and `scale_height` when given)."""
         cfg = self.config
-        view = self.view((frame.shape[1], frame.shape[0]), horizon_y, live)
+        view = self.view((frame.shape[1], frame.shape[0]), horizon_y, live, scale_height)
         bw, bh = view.size
         birdseye = view.warp(frame)
         advance = self.motion.update(birdseye, view.ym_per_px)

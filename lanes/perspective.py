@@ -23,6 +23,7 @@ class BirdsEye:
     ym_per_px: float
     horizon_y: float  # where the trapezoid's sides meet
     live: tuple[int, int, int, int]  # the live box the trapezoid was placed in
+    scale_height: float  # the 16:9 height the tuned trapezoid was sized for
 
     def warp(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The bird's-eye view of a frame."""
@@ -71,29 +72,34 @@ def birdseye_for(
     config: LaneConfig,
     horizon_y: float | None = None,
     live: tuple[int, int, int, int] | None = None,
+    scale_height: float | None = None,
 ) -> BirdsEye:
     """The warp for frames of `frame_size`: the config's trapezoid, moved to the scene.
 
-    The trapezoid is the config's (tuned on a 16:9 picture) for the live box's height, scaled
-    about its vanishing point so that the vanishing point sits on `horizon_y`, centred in the
-    live box, and its bottom at the config's share of the live height: lane lines through the
-    vanishing point stay on it, and a lane's width in pixels grows with the distance below the
-    horizon as it does for any lens. Along the road the scale assumes the shipped camera's
-    vertical field of view (a crop or another lens changes it; the lane's position does not).
+    The trapezoid is the config's (tuned on a 16:9 picture) scaled about its vanishing point so
+    that the vanishing point sits on `horizon_y`, centred in the live box, and its bottom at the
+    config's share of the live height: lane lines through the vanishing point stay on it, and a
+    lane's width in pixels grows with the distance below the horizon as it does for any lens.
+
+    Along the road the scale needs the focal length, which a flat road does not reveal (a lens
+    twice as long on a road twice as stretched gives the same picture): `scale_height` is the
+    height of the 16:9 picture of the tuned lens at this picture's scale (the live height when
+    not given); the tuned trapezoid and the bird's-eye image are sized for it.
     """
     w, h = frame_size
     lx0, ly0, lx1, ly1 = live or (0, 0, w, h)
     lh = ly1 - ly0
-    ref_w = lh * 16 / 9  # the width the x fractions were tuned for, at this height
-    reference = _corners(config, ref_w, lh)
+    ref_h = float(lh if scale_height is None else scale_height)
+    ref_w = ref_h * 16 / 9  # the width the x fractions were tuned for, at this height
+    reference = _corners(config, ref_w, ref_h)
     apex = _apex(reference)
-    horizon = ly0 + apex[1] if horizon_y is None else horizon_y
+    horizon = ly0 + apex[1] * lh / ref_h if horizon_y is None else horizon_y
     bottom = ly0 + config.src_bottom_y * lh
     # (A horizon given near the bottom still leaves a fifth of the tuned trapezoid's height.)
-    scale = max((bottom - horizon) / (config.src_bottom_y * lh - apex[1]), 0.2)
+    scale = max((bottom - horizon) / (config.src_bottom_y * ref_h - apex[1]), 0.2)
     centre = (lx0 + lx1) / 2 + apex[0] - ref_w / 2
     src = np.array([centre, horizon]) + scale * (reference - apex)
-    bw, bh = round(ref_w * config.warp_width), round(lh * config.warp_height)
+    bw, bh = round(ref_w * config.warp_width), round(ref_h * config.warp_height)
     dst = np.array(
         [
             [config.dst_left_x * bw, 0],
@@ -118,4 +124,5 @@ def birdseye_for(
         ym_per_px=length / bh,
         horizon_y=float(horizon),
         live=(lx0, ly0, lx1, ly1),
+        scale_height=ref_h,
     )

@@ -37,7 +37,9 @@ def _pinhole_view(
     bird = np.column_stack([bw / 2 + road[:, 0] / xm, bh - (road[:, 1] - 8.0) / ym])
     matrix = cv2.getPerspectiveTransform(image.astype(np.float32), bird.astype(np.float32))
     inverse = np.linalg.inv(matrix)
-    view = BirdsEye(size, (bw, bh), matrix.astype(np.float64), inverse, xm, ym, cy, (0, 0, *size))
+    view = BirdsEye(
+        size, (bw, bh), matrix.astype(np.float64), inverse, xm, ym, cy, (0, 0, *size), h
+    )
     return view, f, height_m, cy
 
 

@@ -9,7 +9,14 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.reframe import Framing, framing_table, reframe_image, reframe_labels, standard_framings
+from app.reframe import (
+    Framing,
+    distance_ratios,
+    framing_table,
+    reframe_image,
+    reframe_labels,
+    standard_framings,
+)
 from camera_cal import default_calibration_path, load_calibration
 
 # What holds today, pooled over the three clips (see the README's table). The issue's aim is
@@ -18,6 +25,7 @@ PRECISION = 0.85
 RECALL_DROP = 0.05
 MEAN_IOU = 0.65
 LANE_WITHIN = 0.99
+DISTANCE_DRIFT = 0.05  # median distance of the same vehicles, re-framed over as it is
 
 
 def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
@@ -79,7 +87,7 @@ def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
 def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
     """The labelled clips re-framed (horizon 10 % up and down, 4:3, black side bars) and run
     without calibration, as footage of an unknown camera: pooled over the three clips, the
-    vehicles and the lane stay close to the clips as they are."""
+    vehicles, their distances and the lane stay close to the clips as they are."""
     clips = [
         (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
         for c in ("test_video", "project_cut_1", "project_cut_2")
@@ -89,7 +97,25 @@ def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
     table = framing_table(clips, load_calibration(default_calibration_path()), chosen)
     plain = table.pop("as is")
     for name, row in table.items():
+        # The same lens cropped or padded: each vehicle is as far as in the clip as it is.
+        assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
         assert row["precision"] >= PRECISION, (name, row)
         assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
         assert row["mean_iou"] >= MEAN_IOU, (name, row)
         assert row["lane_within_20px"] >= LANE_WITHIN, (name, row)
+
+
+def test_distance_ratios_pair_the_same_vehicle_across_framings() -> None:
+    """A vehicle boxed in both records is paired through the framing's affine map; one seen in
+    only one record is not."""
+    framing = Framing("half", size=(640, 360))
+    reference = [
+        {"frame": 0, "vehicles": [{"box": [100, 400, 300, 500], "distance_m": 20.0}]},
+        {"frame": 1, "vehicles": [{"box": [900, 400, 1100, 500], "distance_m": 30.0}]},
+    ]
+    frames = [
+        {"frame": 0, "vehicles": [{"box": [50, 200, 150, 250], "distance_m": 22.0}]},
+        {"frame": 1, "vehicles": [{"box": [50, 200, 150, 250], "distance_m": 10.0}]},
+    ]
+    ratios = distance_ratios(reference, frames, framing, (1280, 720))
+    np.testing.assert_allclose(ratios, [1.1])

@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from app.sources import probe_video, read_frames
-from camera_cal.scene import SceneTracker, live_box, road_segments, vanishing_point
+from camera_cal.scene import (
+    SceneTracker,
+    live_box,
+    road_segments,
+    scale_height,
+    vanishing_point,
+)
 from tests.helpers import assert_one_line_error, process_clip, run_cli
 
 Frame = np.ndarray
@@ -113,11 +119,31 @@ def test_the_stages_placement_follows_the_scene_in_steps() -> None:
     tracker = SceneTracker(size, default_horizon=300.0, every=1, window=5, min_estimates=3)
     for _ in range(6):
         tracker.update(_road(size, (500.0, 260.0), bars=80))
-    horizon, live = tracker.placement
-    assert abs(horizon - 260) < 4 and live == (80, 0, 880, 540)
+    placement = tracker.placement
+    horizon = placement["horizon_y"]
+    assert abs(horizon - 260) < 4 and placement["live"] == (80, 0, 880, 540)
+    # The bars cut the sides of a 16:9 picture: the scale is still that of its height.
+    assert placement["scale_height"] == 540
     for _ in range(6):
         tracker.update(_road(size, (500.0, 264.0), bars=80))  # 4 px: within 8.1 px
-    assert tracker.placement[0] == horizon and tracker.current.horizon_y > horizon + 2
+    assert tracker.placement["horizon_y"] == horizon and tracker.current.horizon_y > horizon + 2
     for _ in range(6):
         tracker.update(_road(size, (500.0, 290.0), bars=80))
-    assert abs(tracker.placement[0] - 290) < 4
+    assert abs(tracker.placement["horizon_y"] - 290) < 4
+
+
+@pytest.mark.parametrize(
+    ("live", "expected"),
+    [
+        ((1280, 720), 720),  # 16:9 as it is
+        ((1280, 648), 720),  # its top cut off
+        ((960, 720), 720),  # its sides cut off (4:3)
+        ((1920, 1080), 1080),  # scaled
+        ((1080, 1920), 1080),  # upright phone video
+        ((640, 640), 640),  # square: the height is the short side
+    ],
+)
+def test_a_crop_keeps_the_scale_of_the_picture_it_was_cut_from(
+    live: tuple[int, int], expected: float
+) -> None:
+    assert scale_height(live) == expected

@@ -47,7 +47,7 @@ def _rgb(path: Path) -> np.ndarray:
 def test_dense_scores_equal_window_by_window(model: VehicleModel, data_dir: Path) -> None:
     frame = _rgb(data_dir / "test_images" / "test4.jpg")
     band = Band(window=96 / 720, top=390 / 720, bottom=540 / 720, left=0.5, right=1.0)
-    view = View((1280, 720), 420.8, (0, 0, 1280, 720))
+    view = View((1280, 720), 420.8, (0, 0, 1280, 720), 720.0)
     hits = search_band(frame, band, LinearWeights.from_model(model), view, 420.8 / 720)
     assert hits is not None
     # The same windows cut out of the same scaled band and scored one by one.

@@ -33,6 +33,7 @@ class Counter:
         frame: np.ndarray,
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
+        scale_height: float | None = None,
     ) -> Seen:
         self.count += 1
         if self.count == self.fail_at:

@@ -75,13 +75,17 @@ class VehicleDetector:
         size: tuple[int, int],
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
+        scale_height: float | None = None,
     ) -> View:
-        """Where to search frames of `size`: the given horizon and live box, or the defaults."""
+        """Where to search frames of `size`: the given horizon, live box and scale, or the
+        defaults (the whole frame, its height)."""
         default = View.default(size, self.config.reference_horizon)
+        box = default.live if live is None else live
         return View(
             size,
             default.horizon_y if horizon_y is None else horizon_y,
-            default.live if live is None else live,
+            box,
+            float(box[3] - box[1]) if scale_height is None else scale_height,
         )
 
     def search(
@@ -103,12 +107,13 @@ class VehicleDetector:
         frame: NDArray[np.uint8],
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
+        scale_height: float | None = None,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
-        (bands placed from the scene's `horizon_y` and `live` box when given)."""
+        (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given)."""
         cfg = self.config
         h, w = frame.shape[:2]
-        view = self.view((w, h), horizon_y, live)
+        view = self.view((w, h), horizon_y, live, scale_height)
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         hits = self.search(frame, parity, view)
@@ -131,7 +136,7 @@ class VehicleDetector:
         region_boxes = region_boxes + offset
         big = np.minimum(
             region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
-        ) >= cfg.min_box * (view.live[3] - view.live[1])
+        ) >= cfg.min_box * view.scale_height
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.

@@ -91,17 +91,19 @@ class BandHits:
 
 @dataclass(frozen=True)
 class View:
-    """Where vehicles can be in frames of `size`: the horizon row and the live box (x0, y0, x1,
-    y1; inside black bars). Bands are placed relative to these, so any framing works."""
+    """Where vehicles can be in frames of `size`: the horizon row, the live box (x0, y0, x1,
+    y1; inside black bars) and `scale_height`, the height of the 16:9 picture of the tuned lens
+    at this picture's scale. Bands are placed relative to these, so any framing works."""
 
     size: tuple[int, int]
     horizon_y: float
     live: tuple[int, int, int, int]
+    scale_height: float
 
     @classmethod
     def default(cls, size: tuple[int, int], reference_horizon: float) -> View:
         """The whole frame with the horizon at the `reference_horizon` fraction of its height."""
-        return cls(size, reference_horizon * size[1], (0, 0, *size))
+        return cls(size, reference_horizon * size[1], (0, 0, *size), float(size[1]))
 
 
 def band_geometry(
@@ -109,16 +111,16 @@ def band_geometry(
 ) -> tuple[int, int, int, int, float]:
     """(x0, y0, x1, y1) of the band in the frame and its scale (window px / patch px).
 
-    A band's fractions are of the live height, its rows measured from the horizon (a band
-    tuned with the horizon at `reference_horizon` of the height): a car's size in pixels is
+    A band's fractions are of the view's scale height, its rows measured from the horizon (a
+    band tuned with the horizon at `reference_horizon` of the height): a car's size in pixels is
     proportional to how far below the horizon it meets the road, whatever the lens, so a band
     keeps its windows on the cars they fit when the horizon or the size changes."""
     lx0, ly0, lx1, ly1 = view.live
-    lw, lh = lx1 - lx0, ly1 - ly0
-    window = band.window * lh
+    lw, sh = lx1 - lx0, view.scale_height
+    window = band.window * sh
     scale = window / patch
-    y0 = max(round(view.horizon_y + (band.top - reference_horizon) * lh), ly0)
-    y1 = round(view.horizon_y + (band.bottom - reference_horizon) * lh)
+    y0 = max(round(view.horizon_y + (band.top - reference_horizon) * sh), ly0)
+    y1 = round(view.horizon_y + (band.bottom - reference_horizon) * sh)
     y1 = min(max(y1, y0 + round(window)), ly1)
     x0, x1 = lx0 + round(band.left * lw), lx0 + round(band.right * lw)
     return x0, y0, x1, y1, scale
