@@ -25,6 +25,7 @@ from camera_cal import (
     SceneTracker,
     Undistorter,
     build_undistorter,
+    calibrated_scale_height,
 )
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
@@ -124,7 +125,10 @@ class Pipeline:
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
-        self._scene = SceneTracker(size, self._geometry.horizon_y, self.horizon_y)
+        lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
+        self._scene = SceneTracker(
+            size, self._geometry.horizon_y, self.horizon_y, fixed_scale=lens
+        )
         self._facts = FactsTracker(fps)
         self._events.reset()
         self._fps, self._frame = fps, first_frame

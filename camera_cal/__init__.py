@@ -11,7 +11,13 @@ from camera_cal.calibration import (
     save_calibration,
 )
 from camera_cal.scene import SceneGeometry, SceneTracker
-from camera_cal.undistort import CalibrationMismatch, Undistorter, build_undistorter, fits
+from camera_cal.undistort import (
+    CalibrationMismatch,
+    Undistorter,
+    build_undistorter,
+    calibrated_scale_height,
+    fits,
+)
 
 __all__ = [
     "Calibration",
@@ -22,6 +28,7 @@ __all__ = [
     "Undistorter",
     "build_undistorter",
     "calibrate",
+    "calibrated_scale_height",
     "default_calibration_path",
     "find_board_corners",
     "fits",

@@ -119,6 +119,7 @@ class SceneTracker:
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
     `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
     then, and every `every` frames after (it changes slowly; each costs a few milliseconds).
+    `fixed_scale` is the scale height of a calibrated lens; without it the live box gives it.
     """
 
     def __init__(
@@ -130,8 +131,10 @@ class SceneTracker:
         min_estimates: int = 5,
         every: int = 3,
         settle: float = 0.015,
+        fixed_scale: float | None = None,
     ) -> None:
         self.size = size
+        self.fixed_scale = fixed_scale
         self.default_horizon = default_horizon
         self.fixed_horizon = fixed_horizon
         self.min_estimates = min_estimates
@@ -193,7 +196,7 @@ class SceneTracker:
         return {
             "horizon_y": horizon,
             "live": (x0, y0, x1, y1),
-            "scale_height": scale_height((x1 - x0, y1 - y0)),
+            "scale_height": self.fixed_scale or scale_height((x1 - x0, y1 - y0)),
         }
 
     def _measure(self, grey: NDArray[np.uint8], live: Box) -> None:

@@ -8,7 +8,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_cal.calibration import Calibration, CalibrationError
+from camera_cal.calibration import (
+    Calibration,
+    CalibrationError,
+    default_calibration_path,
+    load_calibration,
+)
 
 ASPECT_TOLERANCE = 0.01
 
@@ -75,3 +80,12 @@ def build_undistorter(calibration: Calibration, size: tuple[int, int]) -> Undist
         matrix, calibration.dist_coeffs, None, matrix, size, cv2.CV_16SC2
     )
     return Undistorter(size=size, camera_matrix=matrix, map1=map1, map2=map2)
+
+
+def calibrated_scale_height(calibration: Calibration, size: tuple[int, int]) -> float:
+    """The scale height (see `camera_cal.scene.scale_height`) of frames of `size` from a
+    calibrated camera: its focal length in units of the shipped camera's, whose 16:9 picture
+    the stages were tuned on, so distances follow the lens instead of an assumed one."""
+    shipped = load_calibration(default_calibration_path())
+    fy = scaled_camera_matrix(calibration, size)[1, 1]
+    return float(fy / shipped.camera_matrix[1, 1] * shipped.image_size[1])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from camera_cal import (
     CalibrationError,
     build_undistorter,
     calibrate,
+    calibrated_scale_height,
     default_calibration_path,
     load_calibration,
     save_calibration,
@@ -120,6 +122,18 @@ def test_scaled_calibration_matches_full_size() -> None:
     reference = cv2.resize(big, (640, 360), interpolation=cv2.INTER_AREA)
     inner = (slice(40, -40), slice(40, -40))
     assert np.abs(small[inner].astype(int) - reference[inner].astype(int)).mean() < 3
+
+
+def test_a_calibrated_lens_sets_the_scale_the_stages_work_in() -> None:
+    """The shipped lens is the unit (its picture's height at any size); a lens of twice the
+    focal length reads as a picture twice as tall, so its distances come out right."""
+    cal = load_calibration(default_calibration_path())
+    assert calibrated_scale_height(cal, (1280, 720)) == pytest.approx(720)
+    assert calibrated_scale_height(cal, (1920, 1080)) == pytest.approx(1080)
+    matrix = cal.camera_matrix.copy()
+    matrix[:2, :2] *= 2
+    longer = dataclasses.replace(cal, camera_matrix=matrix)
+    assert calibrated_scale_height(longer, (1280, 720)) == pytest.approx(1440)
 
 
 def test_other_aspect_ratio_is_refused() -> None:
