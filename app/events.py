@@ -227,12 +227,13 @@ class _Excursion:
             return None
         previous = self._last.offset_m
         assert previous is not None
+        # Jumping across the centre is a change; jumping back undoes it (the finder had locked
+        # on a wrong line for a moment: we never left the lane).
         if (
-            not self._changed
-            and math.copysign(1.0, s.offset_m) != self._side
-            and abs(s.offset_m - previous) >= cfg.change_jump_m
+            abs(s.offset_m - previous) >= cfg.change_jump_m
+            and math.copysign(1.0, s.offset_m) != math.copysign(1.0, previous)
         ):
-            self._changed = True
+            self._changed = math.copysign(1.0, s.offset_m) != self._side
         self._last = s
         if abs(s.offset_m) < self._limit(s) - cfg.settle_margin_m:
             if self._came_back is None:

@@ -51,5 +51,6 @@ class LaneConfig:
     max_lane_width_m: float = 5.6
     max_width_change_m: float = 1.8  # top vs bottom width: near parallel (pitch changes it)
     max_jump_m: float = 0.5  # x change of a line vs its smoothed fit: continuity
+    min_radius_m: float = 50.0  # a lane bending tighter than this is not believed
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24

@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 
 from lanes.config import LaneConfig
 from lanes.line import Line
-from lanes.measure import lane_offset, lane_widths, radius_of_curvature
+from lanes.measure import implausible_lane, lane_offset, lane_widths, radius_of_curvature
 from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.search import (
@@ -137,7 +137,9 @@ class LaneFinder:
         else:
             fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
         status = self._check_and_update(fits, pixels, view)
-        lane = self._estimate(view)
+        lane, doubt = self._estimate(view)
+        if doubt is not None:
+            status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
         return LaneResult(lane, debug, status, advance)
 
@@ -195,12 +197,24 @@ class LaneFinder:
                     notes.append(f"{('left', 'right')[i]}: jumped {jump * view.xm_per_px:.2f} m")
         if ok[0] and ok[1]:
             assert fits[0] is not None and fits[1] is not None
-            widths = lane_widths(fits[0], fits[1], rows) * view.xm_per_px
-            bad_width = widths.min() < cfg.min_lane_width_m or widths.max() > cfg.max_lane_width_m
-            if bad_width or np.ptp(widths) > cfg.max_width_change_m:
-                notes.append(f"width {widths.min():.2f}-{widths.max():.2f} m")
-                # Keep the line backed by more paint; the other one is suspect.
-                ok[int(len(pixels[0]) > len(pixels[1]))] = False
+            doubt = implausible_lane(
+                fits[0],
+                fits[1],
+                rows,
+                view.xm_per_px,
+                view.ym_per_px,
+                (cfg.min_lane_width_m, cfg.max_lane_width_m),
+                cfg.max_width_change_m,
+                0.0,  # a bend is judged on the smoothed lane (`_estimate`)
+            )
+            if doubt is not None:
+                notes.append(doubt)
+                # Keep the line with history, else the one backed by more paint.
+                known = [line.smoothed is not None for line in lines]
+                if known[0] != known[1]:
+                    ok[known.index(False)] = False
+                else:
+                    ok[int(len(pixels[0]) > len(pixels[1]))] = False
         for fit, line, good in zip(fits, lines, ok, strict=True):
             if good and fit is not None:
                 line.accept(fit)
@@ -208,19 +222,33 @@ class LaneFinder:
                 line.reject()
         return tuple(notes)
 
-    def _estimate(self, view: BirdsEye) -> LaneEstimate | None:
+    def _estimate(self, view: BirdsEye) -> tuple[LaneEstimate | None, str | None]:
+        """The lane from the lines' history, or None and why when it is not one a road can have
+        (too narrow or wide, not parallel, too sharp a bend): no lane rather than a wrong one."""
         cfg = self.config
         bw, bh = view.size
         left, right = self.left.smoothed, self.right.smoothed
         lane_px = (cfg.dst_right_x - cfg.dst_left_x) * bw
         if left is None and right is None:
-            return None
+            return None, None
         # A side without history follows the other at the standard lane width.
         if left is None:
             assert right is not None
             left = right - np.array([0.0, 0.0, lane_px])
         if right is None:
             right = left + np.array([0.0, 0.0, lane_px])
+        doubt = implausible_lane(
+            left,
+            right,
+            np.array([0.0, bh / 2, float(bh)]),
+            view.xm_per_px,
+            view.ym_per_px,
+            (cfg.min_lane_width_m, cfg.max_lane_width_m),
+            cfg.max_width_change_m,
+            cfg.min_radius_m,
+        )
+        if doubt is not None:
+            return None, doubt
         # From the live picture's bottom up to the trapezoid's top row (where the warp is sure).
         lx0, _, lx1, ly1 = view.live
         middle = (lx0 + lx1) / 2
@@ -245,4 +273,4 @@ class LaneFinder:
         centre_px = float(view.to_birdseye(np.array([[middle, bottom]]))[0, 0])
         offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
-        return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right, width)
+        return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right, width), None

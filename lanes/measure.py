@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lanes.search import Fit, evaluate_fit
@@ -27,3 +29,31 @@ def lane_offset(left: Fit, right: Fit, y_px: float, centre_px: float, xm_per_px:
 def lane_widths(left: Fit, right: Fit, rows: np.ndarray) -> np.ndarray:
     """Right minus left x at the given rows, in bird's-eye pixels."""
     return evaluate_fit(right, rows) - evaluate_fit(left, rows)
+
+
+def implausible_lane(
+    left: Fit,
+    right: Fit,
+    rows: np.ndarray,
+    xm_per_px: float,
+    ym_per_px: float,
+    width_m: tuple[float, float],
+    max_width_change_m: float,
+    min_radius_m: float,
+) -> str | None:
+    """Why a pair of boundaries is not a lane a road can have, or None when it is: its width in
+    metres outside `width_m` at any of `rows`, the two not near parallel (widths differing by
+    more than `max_width_change_m`), or either bending tighter than `min_radius_m`."""
+    widths = lane_widths(left, right, rows) * xm_per_px
+    if widths.min() < width_m[0] or widths.max() > width_m[1]:
+        return f"width {widths.min():.2f}-{widths.max():.2f} m"
+    if np.ptp(widths) > max_width_change_m:
+        return f"not parallel ({widths.min():.2f}-{widths.max():.2f} m wide)"
+    radius = min(
+        radius_of_curvature(fit, float(y), xm_per_px, ym_per_px, math.inf)
+        for fit in (left, right)
+        for y in rows
+    )
+    if radius < min_radius_m:
+        return f"bends at a {radius:.0f} m radius"
+    return None

@@ -83,6 +83,14 @@ def test_a_jump_across_the_centre_is_a_lane_change(side: float, kind: str) -> No
     assert 0.7 < e.start_s < 0.9 and 2.0 < e.end_s < 2.6
 
 
+def test_a_jump_across_and_straight_back_is_no_lane_change() -> None:
+    # Over the right line; for three frames the finder takes a wrong line (offset jumps across),
+    # then finds the lane again and we drift back in: a departure, not a change.
+    offsets = _ramp((0.0, 1.5, 1.0), (1.5, 1.5, 0.5))
+    offsets += [-0.6] * 3 + _ramp((1.5, 1.5, 2.0), (1.5, 0.0, 1.0), (0.0, 0.0, 1.0))
+    assert [e.kind for e in find_events(_series(offsets))] == ["lane_departure"]
+
+
 def test_lane_lost_for_long_ends_an_excursion_where_it_was_last_seen() -> None:
     offsets: list[float | None] = [*_ramp((0.0, 1.2, 1.0), (1.2, 1.2, 1.0)), *[None] * 100]
     (e,) = find_events(_series(offsets))

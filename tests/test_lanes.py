@@ -12,7 +12,7 @@ from app.evaluate import evaluate, load_labels
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder
 from lanes.line import Line
-from lanes.measure import radius_of_curvature
+from lanes.measure import implausible_lane, radius_of_curvature
 from lanes.perspective import birdseye_for
 from lanes.search import LinePixels, fit_lane, fit_line
 from tests.helpers import process_clip
@@ -129,3 +129,24 @@ def test_labelled_clips_lane_accuracy(data_dir: Path, tmp_path: Path, clip: str)
         ]
         changes.extend(np.abs(np.diff(xs)))
     assert np.percentile(changes, 99) <= 10.0
+
+
+@pytest.mark.parametrize(
+    ("right_c", "right_b", "bend_m", "why"),
+    [
+        (370.0, 0.0, None, None),  # 3.7 m wide, parallel, straight: a lane
+        (-5.0, 0.0, None, "width"),  # the lines crossed
+        (650.0, 0.0, None, "width"),  # 6.5 m: two lanes
+        (300.0, 0.5, None, "not parallel"),  # 3.0 m far, 5.0 m near
+        (370.0, 0.0, 30.0, "bends"),  # both lines on a 30 m radius
+    ],
+)
+def test_the_finder_believes_only_a_lane_a_road_can_have(
+    right_c: float, right_b: float, bend_m: float | None, why: str | None
+) -> None:
+    xm, ym, rows = 0.01, 0.05, np.array([0.0, 200.0, 400.0])
+    a = ym**2 / (2 * bend_m * xm) if bend_m else 0.0
+    left = np.array([a, 0.0, 0.0])
+    right = np.array([a, right_b, right_c])
+    doubt = implausible_lane(left, right, rows, xm, ym, (2.6, 5.6), 1.8, 50.0)
+    assert (doubt is None) if why is None else (doubt is not None and why in doubt), doubt
