@@ -22,20 +22,8 @@ data: $(STAMP)
 calibrate: data
 	$(BIN)/roadview calibrate --images $(DATA)/camera_cal --board 9x6 --out camera_cal/dashcam.json
 
-# Hard negatives are mined from the wild clips without vehicles when they are there (their first
-# 60 %; the rest measures the result). The grouped search's C values lie within 0.1 % of each
-# other; 3e-4 keeps the boxes' fit on the labelled clips.
-WILD := $(SHARED)/wild
-NEGATIVE_CLIPS := $(wildcard $(WILD)/rural_2lane_wet.mp4 $(WILD)/night_highway_istock.mp4)
 train: data
-ifneq ($(NEGATIVE_CLIPS),)
-	$(BIN)/roadview mine $(NEGATIVE_CLIPS) --out output/hard_negatives --every 1
-	$(BIN)/roadview train --data $(DATA) --out vehicles/models/default.npz --c 3e-4 \
-		--hard-negatives output/hard_negatives
-else
-	@echo "no wild clips in $(WILD): training without hard negatives"
-	$(BIN)/roadview train --data $(DATA) --out vehicles/models/default.npz --c 3e-4
-endif
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/default.npz
 
 demo: data
 	$(BIN)/roadview process $(DATA)/videos/test_video.mp4 -o output/test_video_roadview.mp4 \

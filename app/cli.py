@@ -342,9 +342,6 @@ def train_command(
         Path | None, typer.Option(help="Folder of extra non-vehicle patches mined from frames.")
     ] = None,
     jobs: Annotated[int, typer.Option(help="Parallel workers.")] = 2,
-    c: Annotated[
-        float | None, typer.Option("--c", help="SVM C (default: chosen by a grouped search).")
-    ] = None,
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
@@ -353,8 +350,6 @@ def train_command(
     from vehicles.model import save_model
     from vehicles.train import TrainConfig, format_training_report, train_model
 
-    if c is not None and c <= 0:
-        raise InputError(f"--c {c} must be positive")
     patches = load_patches(data)
     extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
     bar = Progress(len(patches), label="features", unit="patches/s")
@@ -366,7 +361,7 @@ def train_command(
 
     model = train_model(
         patches,
-        cfg=TrainConfig(n_jobs=jobs) if c is None else TrainConfig(c_grid=(c,), n_jobs=jobs),
+        cfg=TrainConfig(n_jobs=jobs),
         progress=progress,
         log=lambda m: typer.echo(m, err=True),
         extra_negatives=extra,
@@ -379,32 +374,6 @@ def train_command(
         raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
     typer.echo(format_training_report(model.report))
     typer.echo(f"saved {out}")
-
-
-@cli.command("mine")
-def mine_command(
-    videos: Annotated[list[Path], typer.Argument(help="Clips without any vehicle in them.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Folder of patches to write.")],
-    share: Annotated[
-        float, typer.Option(help="Share of each clip to mine, from its start (the rest is kept).")
-    ] = 0.6,
-    every: Annotated[int, typer.Option(help="Mine every n-th frame.")] = 3,
-    model: ModelOption = None,
-) -> None:
-    """Cut the windows the vehicle model is sure of in clips without vehicles into patches, for
-    'train --hard-negatives': what fooled it there is learned as road."""
-    from app.assembly import build_stages
-    from app.mining import mine_clips
-
-    if not 0 < share <= 1 or every < 1:
-        raise InputError("--share must be in (0, 1] and --every at least 1")
-    for video in videos:
-        if not video.is_file():
-            raise InputError(f"{video} does not exist; give clips without vehicles to mine")
-    detector = build_stages(lanes=False, model=model).vehicles
-    assert detector is not None
-    total = mine_clips(videos, detector, out, share, every, log=typer.echo)
-    typer.echo(f"wrote {total} patches to {out}")
 
 
 @cli.command("evaluate-classifier")
