@@ -12,7 +12,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-LANE_WIDTH_M = 3.7  # when the lane's own width is not known
+LANE_WIDTH_M = 3.7  # when the lane's own width is not known: the usual width
 
 KIND_TITLES = {
     "lane_departure": "lane departure",
@@ -312,12 +312,23 @@ def find_events(signals: Iterable[FrameSignals], config: EventConfig | None = No
     return detector.finish()
 
 
+def nearest_ahead(row: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """The nearest vehicle in our lane of a record line (one with a known distance), or None."""
+    ahead = [
+        v
+        for v in row.get("vehicles") or []
+        if v.get("lane") == "ego"
+        and isinstance(v.get("distance_m"), int | float)
+        and math.isfinite(v["distance_m"])
+    ]
+    return min(ahead, key=lambda v: float(v["distance_m"]), default=None)
+
+
 def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
     """A record line's signals (see app/record.py): the lane's offset and width, the headway and
     time to collision, and the nearest vehicle in our lane."""
     lane = row.get("lane") or {}
-    ahead = [v for v in row.get("vehicles") or [] if v.get("lane") == "ego" and "distance_m" in v]
-    nearest = min(ahead, key=lambda v: v["distance_m"], default=None)
+    nearest = nearest_ahead(row)
     return FrameSignals(
         int(row["frame"]),
         float(row["time_s"]),

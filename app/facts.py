@@ -17,12 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from app.events import LANE_WIDTH_M
 from lanes.finder import LaneEstimate
 from lanes.perspective import BirdsEye
 from lanes.search import evaluate_fit
 from vehicles.detections import Detections
-
-LANE_WIDTH_M = 3.7  # when no lane is known: lanes of the usual width around the camera
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ undistorted frame), so the vehicle stage can run in a worker process, one frame 
 
 from __future__ import annotations
 
+import functools
 import time
 from collections import deque
 from collections.abc import Iterator
@@ -29,7 +30,7 @@ from camera_cal import (
 )
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
-from lanes.perspective import birdseye_for
+from lanes.perspective import BirdsEye, birdseye_for
 from vehicles.detector import VehicleDetector, VehicleResult
 
 
@@ -51,6 +52,17 @@ class FrameOutput:
 
     undistorted: Frame
     result: FrameResult
+
+
+@functools.lru_cache(maxsize=4)
+def _scene_warp(
+    size: tuple[int, int],
+    horizon_y: float,
+    live: tuple[int, int, int, int],
+    scale_height: float,
+) -> BirdsEye:
+    """The default lane config's warp for a scene placement (built once per placement)."""
+    return birdseye_for(size, LaneConfig(), horizon_y, live, scale_height)
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,8 +215,13 @@ class Pipeline:
             vehicles = self.vehicles.process(undistorted, **started.placement)
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
         facts = None
-        # Metres follow the lane stage's warp, which follows the scene.
-        current = self.lanes.current_view if self.lanes is not None else None
+        # Metres follow the warp placed from the scene: the lane stage's, or without it the
+        # default lane config's for the same placement.
+        current = (
+            self.lanes.current_view
+            if self.lanes is not None
+            else _scene_warp((undistorted.shape[1], undistorted.shape[0]), **started.placement)
+        )
         if (
             self._geometry is not None
             and current is not None

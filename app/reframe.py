@@ -43,6 +43,11 @@ class Framing:
     pad: Box = (0, 0, 0, 0)
     size: tuple[int, int] | None = None
 
+    @property
+    def unchanged(self) -> bool:
+        """Whether the picture stays as it is (no crop, pad or resize)."""
+        return self.crop is None and not any(self.pad) and self.size is None
+
     def padded_size(self, source: tuple[int, int]) -> tuple[int, int]:
         """(width, height) after the crop and the padding, before the resize."""
         x0, y0, x1, y1 = self.crop or (0, 0, *source)
@@ -248,7 +253,7 @@ def framing_table(
                 for video, labels in clips
             ]
         table[framing.name] = pooled(scores)
-        if framing == Framing("as is"):
+        if framing.unchanged:
             plain = [s["frames"] for s in scores]
         elif plain:
             ratios = np.concatenate(

@@ -20,14 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from app.events import LANE_WIDTH_M, Event, event_from_record
+from app.events import LANE_WIDTH_M, Event, EventConfig, event_from_record, nearest_ahead
 from app.record import read_record_lines
 from app.sources import probe_video, read_frames
 from camera_cal import Calibration, build_undistorter, fits
 
 PLOT_W, PLOT_H = 860, 170
 MARGIN_L, MARGIN_R, MARGIN_T, MARGIN_B = 58, 12, 26, 26
-CAR_WIDTH_M = 1.8
 THUMB_W = 320
 
 
@@ -51,11 +50,8 @@ def _number(value: Any) -> float:
 
 
 def _ahead_distance(row: Mapping[str, Any]) -> float:
-    distances = [
-        _number(v.get("distance_m")) for v in row.get("vehicles") or [] if v.get("lane") == "ego"
-    ]
-    distances = [d for d in distances if math.isfinite(d)]
-    return min(distances) if distances else math.nan
+    nearest = nearest_ahead(row)
+    return float(nearest["distance_m"]) if nearest is not None else math.nan
 
 
 def _curvature(row: Mapping[str, Any]) -> float:
@@ -77,7 +73,7 @@ def record_series(rows: Sequence[Mapping[str, Any]]) -> tuple[NDArray[np.float64
         )
     if any("lane" in r for r in rows):
         offsets = np.array([_number((r.get("lane") or {}).get("offset_m")) for r in rows])
-        touch = (LANE_WIDTH_M - CAR_WIDTH_M) / 2
+        touch = (LANE_WIDTH_M - EventConfig().car_width_m) / 2  # a wheel on the line
         series.append(
             Series("offset", "Offset in lane (+ right)", "m", offsets, (-touch, 0.0, touch))
         )

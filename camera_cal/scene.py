@@ -23,22 +23,12 @@ MEASURE_WIDTH = 640
 
 @dataclass(frozen=True)
 class SceneGeometry:
-    """Where the road can be seen in frames of `size`: the live box and the horizon row.
-
-    `camera_height_m` sets the ground's scale: a road point at row v (below the horizon) lies at
-    (v - horizon_y) / camera_height_m pixels per metre, across and (with the focal length) ahead.
-    """
+    """Where the road can be seen in frames of `size`: the live box and the horizon row."""
 
     size: tuple[int, int]
     horizon_y: float
     live: Box
     estimated: bool = False  # the horizon came from the footage (not the default)
-    camera_height_m: float = 1.2
-
-    def pixels_per_metre(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Lateral pixels per metre of the road at frame rows `rows` (0 at or above the horizon)."""
-        below = np.asarray(rows, np.float64) - self.horizon_y
-        return np.maximum(below, 0.0) / self.camera_height_m
 
 
 def scale_height(live_size: tuple[int, int]) -> float:
@@ -165,7 +155,8 @@ class SceneTracker:
         # Bars: sample every 4th row and column (bars are wide; this costs ~1 ms).
         np.maximum(self._row_max, grey[:, ::4].max(axis=1), out=self._row_max)
         np.maximum(self._col_max, grey[::4].max(axis=0), out=self._col_max)
-        # Every frame until the first estimate stands (the stages wait for it), then every few.
+        # Every frame until the first estimate stands (the stages use the default until then),
+        # then every few.
         due = self._count % self.every == 0 or len(self._estimates) < self.min_estimates
         live = self._box() if due else self._current.live
         if self.fixed_horizon is None and due:
@@ -196,7 +187,9 @@ class SceneTracker:
         return {
             "horizon_y": horizon,
             "live": (x0, y0, x1, y1),
-            "scale_height": self.fixed_scale or scale_height((x1 - x0, y1 - y0)),
+            "scale_height": scale_height((x1 - x0, y1 - y0))
+            if self.fixed_scale is None
+            else self.fixed_scale,
         }
 
     def _measure(self, grey: NDArray[np.uint8], live: Box) -> None:

@@ -140,8 +140,7 @@ class VehicleDetector:
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
-        x0, y0, x1, y1 = view.live
-        picture = (float(x0), float(y0), float(x1), float(y1))
+        picture = (float(lx0), float(ly0), float(lx1), float(ly1))
         shown = self.tracker.update(regions, picture).clipped(picture)
         debug = (
             VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold)
