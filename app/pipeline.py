@@ -31,7 +31,13 @@ from camera_cal import (
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
 from lanes.perspective import BirdsEye, birdseye_for
+from vehicles.detections import Detections
 from vehicles.detector import VehicleDetector, VehicleResult
+
+# An unknown camera (no calibration, no --horizon): the stages wait this long at most for the
+# footage's own horizon rather than place their work by a default that fits another camera.
+HORIZON_WAIT_S = 3.0
+WAITING = "waiting for the horizon"
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +80,7 @@ class _Started:
     placement: dict[str, Any]  # the scene as the stages take it (see SceneTracker.placement)
     lane: LaneResult | None
     timings: dict[str, float]
+    held: bool = False  # the stages waited for the horizon: they did not see this frame
 
 
 class Pipeline:
@@ -107,6 +114,8 @@ class Pipeline:
         self._events = EventDetector()
         self._fps = 0.0
         self._frame = 0  # index of the next frame to finish
+        self._started = 0  # frames started since `prepare`
+        self._wait = 0  # frames the stages may wait for the horizon
 
     def __enter__(self) -> Pipeline:
         return self
@@ -143,7 +152,9 @@ class Pipeline:
         )
         self._facts = FactsTracker(fps)
         self._events.reset()
-        self._fps, self._frame = fps, first_frame
+        self._fps, self._frame, self._started = fps, first_frame, 0
+        unknown = self.calibration is None and self.horizon_y is None
+        self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:
             self.close()  # a larger frame than the slots hold: start the worker again
@@ -193,6 +204,11 @@ class Pipeline:
         scene = self._scene.update(undistorted)
         timings["scene"] = (time.perf_counter() - t0) * 1000
         placement = self._scene.placement
+        held = not scene.estimated and self._started < self._wait
+        self._started += 1
+        if held:
+            waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
+            return _Started(undistorted, scene, placement, waiting, timings, held=True)
         if self._worker is not None:
             self._worker.submit(undistorted, **placement)
         lane = None
@@ -206,7 +222,9 @@ class Pipeline:
         """Add the vehicles (from the worker, or run here) to the frame's result."""
         undistorted, lane, timings = started.undistorted, started.lane, started.timings
         vehicles = None
-        if self._worker is not None:
+        if started.held:
+            vehicles = VehicleResult(Detections()) if self.vehicles is not None else None
+        elif self._worker is not None:
             found, timings["vehicles"] = self._worker.collect()
             assert isinstance(found, VehicleResult)
             vehicles = found

@@ -26,3 +26,12 @@ def data_dir() -> Path:
 def test_video(data_dir: Path) -> Path:
     """The 38-frame labelled test clip."""
     return data_dir / "videos" / "test_video.mp4"
+
+
+@pytest.fixture(scope="session")
+def wild_dir(data_dir: Path) -> Path:
+    """The unlabelled clips of other cameras (../shared/data/wild); tests skip without them."""
+    for candidate in (data_dir / "wild", ROOT.parent / "shared" / "data" / "wild"):
+        if (candidate / "night_highway_istock.mp4").exists():
+            return candidate
+    pytest.skip("no wild clips beside the checkout (../shared/data/wild)")

@@ -22,7 +22,12 @@ def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[st
     """Short derived clips: other sizes, a truncated file, an empty one."""
     folder = tmp_path_factory.mktemp("clips")
     out = {}
-    for name, size in (("small", "640:360"), ("wide960", "960:540"), ("square", "640:480")):
+    # The 960x540 clip is longer: without a calibration the stages wait for the horizon first.
+    for name, size, seconds in (
+        ("small", "640:360", "0.4"),
+        ("wide960", "960:540", "1.2"),
+        ("square", "640:480", "0.4"),
+    ):
         out[name] = folder / f"{name}.mp4"
         subprocess.run(
             [
@@ -34,7 +39,7 @@ def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[st
                 "-vf",
                 f"scale={size}",
                 "-t",
-                "0.4",
+                seconds,
                 str(out[name]),
             ],
             check=True,
@@ -62,7 +67,9 @@ def test_other_camera_with_calibration_none(clips: dict[str, Path], tmp_path: Pa
     assert result.returncode == 0, result.stderr
     assert count_frames(out)[0].size == (960, 540)
     lanes = [r["lane"] for r in read_record(record)]
-    assert all(lane is not None for lane in lanes)
+    # An unknown camera: the first frames wait for the footage's horizon (it stood in 10 here).
+    found = [lane is not None for lane in lanes]
+    assert True in found[:15] and all(found[found.index(True) :])
     # The lane is found at 960x540 as at 1280x720: left line in the left half, right in the right.
     assert lanes[-1]["left"][0][0] < 480 < lanes[-1]["right"][0][0]
 

@@ -147,3 +147,18 @@ def test_a_crop_keeps_the_scale_of_the_picture_it_was_cut_from(
     live: tuple[int, int], expected: float
 ) -> None:
     assert scale_height(live) == expected
+
+
+def test_an_unknown_camera_waits_for_its_horizon(wild_dir: Path, tmp_path: Path) -> None:
+    """Started mid-clip on the night highway without a calibration, the default horizon sits far
+    below the road's: the stages wait for the footage's own estimate rather than draw a lane and
+    box dark road by the default; once it stands, the lane is found."""
+    clip = wild_dir / "night_highway_istock.mp4"
+    rows = process_clip(clip, tmp_path, "--calibration", "none", "--start", "11.7", "--end", "16")
+    default = rows[0]["horizon_y"]
+    waited = [r for r in rows if r["horizon_y"] == default]
+    placed = [r for r in rows if r["horizon_y"] != default]
+    assert 10 <= len(waited) < 75  # at most the 3 s wait
+    assert not any(r["lane"] or r["vehicles"] for r in waited)
+    assert all(abs(r["horizon_y"] - default) > 0.2 * default for r in placed)
+    assert sum(1 for r in placed if r["lane"]) >= 0.9 * len(placed)
