@@ -229,10 +229,9 @@ class _Excursion:
         assert previous is not None
         # Jumping across the centre is a change; jumping back undoes it (the finder had locked
         # on a wrong line for a moment: we never left the lane).
-        if (
-            abs(s.offset_m - previous) >= cfg.change_jump_m
-            and math.copysign(1.0, s.offset_m) != math.copysign(1.0, previous)
-        ):
+        if abs(s.offset_m - previous) >= cfg.change_jump_m and math.copysign(
+            1.0, s.offset_m
+        ) != math.copysign(1.0, previous):
             self._changed = math.copysign(1.0, s.offset_m) != self._side
         self._last = s
         if abs(s.offset_m) < self._limit(s) - cfg.settle_margin_m:

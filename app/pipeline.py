@@ -147,9 +147,7 @@ class Pipeline:
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
-        self._scene = SceneTracker(
-            size, self._geometry.horizon_y, self.horizon_y, fixed_scale=lens
-        )
+        self._scene = SceneTracker(size, self._geometry.horizon_y, self.horizon_y, fixed_scale=lens)
         self._facts = FactsTracker(fps)
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0

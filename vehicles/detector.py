@@ -134,9 +134,12 @@ class VehicleDetector:
         frame_heat = self.heatmap.add((lx1 - lx0, ly1 - ly0), heated, weight)
         region_boxes, peaks = self.heatmap.regions()
         region_boxes = region_boxes + offset
-        big = np.minimum(
-            region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
-        ) >= cfg.min_box * view.scale_height
+        big = (
+            np.minimum(
+                region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
+            )
+            >= cfg.min_box * view.scale_height
+        )
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
