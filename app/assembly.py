@@ -25,11 +25,14 @@ def build_stages(
     keep_debug: bool = False,
     still: bool = False,
     classifier: VehicleModel | None = None,
+    verifier: Path | None = None,
+    verify: bool = True,
 ) -> Stages:
     """The stages that are switched on.
 
     For a still there is no history: every band is searched and nothing waits for confirmation.
-    A `classifier` already loaded is used instead of loading `model`.
+    A `classifier` already loaded is used instead of loading `model`. The vehicle stage's windows
+    are also checked by the `verifier` model (the shipped one by default) unless `verify` is off.
     """
     lane_stage = vehicle_stage = None
     if lanes:
@@ -39,9 +42,10 @@ def build_stages(
     if vehicles:
         from vehicles.config import DetectorConfig
         from vehicles.detector import VehicleDetector
-        from vehicles.model import load_model
+        from vehicles.model import default_verifier_path, load_model
 
         classifier = classifier if classifier is not None else load_model(model)
         config = DetectorConfig().for_still() if still else DetectorConfig()
-        vehicle_stage = VehicleDetector(classifier, config, keep_debug=keep_debug)
+        checker = load_model(verifier or default_verifier_path()) if verify else None
+        vehicle_stage = VehicleDetector(classifier, config, keep_debug, checker)
     return Stages(lane_stage, vehicle_stage)

@@ -6,7 +6,7 @@ import json
 import sys
 import traceback
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -38,6 +38,14 @@ CalibrationOption = Annotated[
 ]
 ModelOption = Annotated[
     Path | None, typer.Option(help="Vehicle model file (default: the shipped one).")
+]
+VerifierOption = Annotated[
+    str | None,
+    typer.Option(
+        metavar="FILE|none",
+        help="Model that vetoes the vehicle model's windows (default: the shipped one trained "
+        "also on hard negatives), or 'none'.",
+    ),
 ]
 HorizonOption = Annotated[
     float | None,
@@ -112,6 +120,13 @@ def _calibration(value: str) -> Calibration | None:
     return None if value.lower() == "none" else load_calibration(Path(value))
 
 
+def _verifier(value: str | None) -> dict[str, Any]:
+    """The --verifier option as `build_stages` keywords: a file, the shipped one, or 'none'."""
+    if value is not None and value.lower() == "none":
+        return {"verify": False}
+    return {"verifier": Path(value) if value is not None else None}
+
+
 @cli.command("process")
 def process_command(
     source: Annotated[Path, typer.Argument(metavar="INPUT", help="Video or still image.")],
@@ -138,6 +153,7 @@ def process_command(
         bool, typer.Option("--vehicles/--no-vehicles", help="Detect and track vehicles.")
     ] = True,
     model: ModelOption = None,
+    verifier: VerifierOption = None,
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
     horizon: HorizonOption = None,
 ) -> None:
@@ -153,7 +169,9 @@ def process_command(
     output, record = outputs.media, outputs.record
     cal = _calibration(calibration)
     still = is_image(source)
-    stages = build_stages(lanes, vehicles, model, keep_debug=insets, still=still)
+    stages = build_stages(
+        lanes, vehicles, model, keep_debug=insets, still=still, **_verifier(verifier)
+    )
     annotators = default_annotators(insets)
     if still:
         summary = process_still(
@@ -241,6 +259,7 @@ def debug_command(
     ] = None,
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
     model: ModelOption = None,
+    verifier: VerifierOption = None,
     horizon: HorizonOption = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
@@ -255,7 +274,8 @@ def debug_command(
     folder = out if out is not None else source.with_name(f"{source.stem}_debug")
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
-    pipeline = Pipeline(cal, *build_stages(model=model, keep_debug=True), horizon_y=horizon)
+    stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
+    pipeline = Pipeline(cal, *stages, horizon_y=horizon)
     written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 
@@ -342,6 +362,9 @@ def train_command(
         Path | None, typer.Option(help="Folder of extra non-vehicle patches mined from frames.")
     ] = None,
     jobs: Annotated[int, typer.Option(help="Parallel workers.")] = 2,
+    c: Annotated[
+        float | None, typer.Option("--c", help="SVM C (default: chosen by a grouped search).")
+    ] = None,
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
@@ -350,6 +373,8 @@ def train_command(
     from vehicles.model import save_model
     from vehicles.train import TrainConfig, format_training_report, train_model
 
+    if c is not None and c <= 0:
+        raise InputError(f"--c {c} must be positive")
     patches = load_patches(data)
     extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
     bar = Progress(len(patches), label="features", unit="patches/s")
@@ -361,7 +386,7 @@ def train_command(
 
     model = train_model(
         patches,
-        cfg=TrainConfig(n_jobs=jobs),
+        cfg=TrainConfig(n_jobs=jobs) if c is None else TrainConfig(c_grid=(c,), n_jobs=jobs),
         progress=progress,
         log=lambda m: typer.echo(m, err=True),
         extra_negatives=extra,
@@ -374,6 +399,32 @@ def train_command(
         raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
     typer.echo(format_training_report(model.report))
     typer.echo(f"saved {out}")
+
+
+@cli.command("mine")
+def mine_command(
+    videos: Annotated[list[Path], typer.Argument(help="Clips without any vehicle in them.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder of patches to write.")],
+    share: Annotated[
+        float, typer.Option(help="Share of each clip to mine, from its start (the rest is kept).")
+    ] = 0.6,
+    every: Annotated[int, typer.Option(help="Mine every n-th frame.")] = 3,
+    model: ModelOption = None,
+) -> None:
+    """Cut the windows the vehicle model is sure of in clips without vehicles into patches, for
+    'train --hard-negatives': what fooled it there is learned as road."""
+    from app.assembly import build_stages
+    from app.mining import mine_clips
+
+    if not 0 < share <= 1 or every < 1:
+        raise InputError("--share must be in (0, 1] and --every at least 1")
+    for video in videos:
+        if not video.is_file():
+            raise InputError(f"{video} does not exist; give clips without vehicles to mine")
+    detector = build_stages(lanes=False, model=model, verify=False).vehicles
+    assert detector is not None
+    total = mine_clips(videos, detector, out, share, every, log=typer.echo)
+    typer.echo(f"wrote {total} patches to {out}")
 
 
 @cli.command("evaluate-classifier")

@@ -85,6 +85,30 @@ def test_pasted_vehicle_is_found(
     assert max(iou(box, truth) for box in found.boxes) >= 0.5
 
 
+def test_the_verifier_vetoes_windows_but_the_model_places_them(
+    model: VehicleModel, data_dir: Path
+) -> None:
+    """A pasted car: with the shipped verifier the same box as without one; a verifier that
+    accepts nothing leaves nothing; one trained on other features is refused."""
+    from dataclasses import replace
+
+    from vehicles.features import FeatureConfig
+    from vehicles.model import ModelError, default_verifier_path
+
+    road = _rgb(data_dir / "test_images" / "straight_lines1.jpg").copy()
+    road[400:496, 300:396] = cv2.resize(_vehicle_patch(data_dir), (96, 96))
+    still = DetectorConfig().for_still()
+    alone = VehicleDetector(model, still).process(road).detections
+    verifier = load_model(default_verifier_path())
+    checked = VehicleDetector(model, still, verifier=verifier).process(road).detections
+    assert len(alone) >= 1 and np.allclose(checked.boxes, alone.boxes, atol=8)
+    never = replace(verifier, intercept=-1e6)
+    assert len(VehicleDetector(model, still, verifier=never).process(road).detections) == 0
+    other = replace(verifier, config=FeatureConfig(color_space="LUV"))
+    with pytest.raises(ModelError, match="other features"):
+        VehicleDetector(model, still, verifier=other)
+
+
 @pytest.mark.parametrize(("size", "side"), [(96, "right"), (128, "right"), (128, "left")])
 def test_vehicle_cut_by_the_frame_edge_is_found(
     model: VehicleModel, data_dir: Path, size: int, side: str

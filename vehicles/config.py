@@ -69,6 +69,10 @@ class DetectorConfig:
     # 420.8 of 720 rows); with another horizon they move with it.
     reference_horizon: float = 420.8 / 720
     min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
+    # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
+    # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
+    # fooled the detector, while the detector's windows still place the boxes.
+    min_verified: float = 0.3
     # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
     # training crops are wider than the car is tall, with road showing below it.
     heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)

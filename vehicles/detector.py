@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 from vehicles.config import DetectorConfig
 from vehicles.detections import Detections
 from vehicles.heatmap import Heatmap
-from vehicles.model import VehicleModel
+from vehicles.model import ModelError, VehicleModel
 from vehicles.search import BandHits, LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
@@ -24,6 +24,7 @@ class VehicleDebug:
     history_heat: NDArray[np.float32]
     regions: Detections
     heat_threshold: float
+    vetoed: NDArray[np.float64]  # (n, 4) windows the model was sure of and the verifier was not
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,10 +55,17 @@ class VehicleDetector:
         model: VehicleModel,
         config: DetectorConfig | None = None,
         keep_debug: bool = False,
+        verifier: VehicleModel | None = None,
     ) -> None:
+        if verifier is not None and verifier.config != model.config:
+            raise ModelError("the verifier was trained on other features than the model")
         self.model = model
+        self.verifier = verifier
         self.config = config if config is not None else DetectorConfig()
         self.weights = LinearWeights.from_model(model)
+        self.verifier_weights = (
+            LinearWeights.from_model(verifier) if verifier is not None else None
+        )
         self.keep_debug = keep_debug
         self.heatmap = Heatmap(self.config.heat)
         # Region boxes come from heat averaged over the recent frames: centred that far back.
@@ -97,7 +105,14 @@ class VehicleDetector:
             bands = bands[parity::2]
         where = view or self.view((frame.shape[1], frame.shape[0]))
         found = (
-            search_band(frame, band, self.weights, where, self.config.reference_horizon)
+            search_band(
+                frame,
+                band,
+                self.weights,
+                where,
+                self.config.reference_horizon,
+                self.verifier_weights,
+            )
             for band in bands
         )
         return tuple(hit for hit in found if hit is not None)
@@ -124,6 +139,12 @@ class VehicleDetector:
             else np.zeros(0)
         )
         strong = proba >= cfg.min_probability
+        vetoed = np.zeros((0, 4))
+        if self.verifier is not None and hits:
+            verified = np.concatenate([hit.verified for hit in hits if hit.verified is not None])
+            sure = self.verifier.probability(verified) >= cfg.min_verified
+            vetoed = boxes[strong & ~sure]
+            strong &= sure
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
         # Heat is kept over the live picture alone: windows reaching past its sides pile their
@@ -146,7 +167,9 @@ class VehicleDetector:
         picture = (float(lx0), float(ly0), float(lx1), float(ly1))
         shown = self.tracker.update(regions, picture).clipped(picture)
         debug = (
-            VehicleDebug(hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold)
+            VehicleDebug(
+                hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold, vetoed
+            )
             if self.keep_debug
             else None
         )

@@ -33,6 +33,11 @@ def default_model_path() -> Path:
     return Path(__file__).with_name("models") / "default.npz"
 
 
+def default_verifier_path() -> Path:
+    """The committed verifier: the model trained also on hard negatives (see `make train`)."""
+    return Path(__file__).with_name("models") / "verifier.npz"
+
+
 @dataclass(frozen=True, eq=False)
 class VehicleModel:
     """Linear classifier on standardised patch features with calibrated probabilities."""

@@ -87,6 +87,7 @@ class BandHits:
     window_px: float
     boxes: NDArray[np.float64]  # (n, 4)
     decisions: NDArray[np.float64]  # (n,)
+    verified: NDArray[np.float64] | None = None  # (n,) the verifier's decisions, when one is used
 
 
 @dataclass(frozen=True)
@@ -132,9 +133,11 @@ def search_band(
     weights: LinearWeights,
     view: View,
     reference_horizon: float,
+    verifier: LinearWeights | None = None,
 ) -> BandHits | None:
-    """Score every window of one band (HOG computed once for the band at its scale); None when
-    the band does not fit in the live picture."""
+    """Score every window of one band (HOG computed once for the band at its scale), by
+    `weights` and, when given, by the `verifier` on the same features; None when the band does
+    not fit in the live picture."""
     cfg = weights.config
     x0, y0, x1, y1, scale = band_geometry(band, view, cfg.patch_size, reference_horizon)
     if y1 - y0 < scale * cfg.patch_size * 0.99:
@@ -154,9 +157,9 @@ def search_band(
     interpolation = cv2.INTER_AREA if scale > 1 else cv2.INTER_LINEAR
     scaled = np.asarray(cv2.resize(crop, size, interpolation=interpolation))
     maps = feature_maps(scaled, cfg)
-    decision = score_windows(maps, weights)
     step = band.step_cells
-    decision = decision[::step, ::step]
+    decision = score_windows(maps, weights)[::step, ::step]
+    verified = None if verifier is None else score_windows(maps, verifier)[::step, ::step].ravel()
     cy, cx = np.mgrid[0 : decision.shape[0], 0 : decision.shape[1]] * step
     # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
     sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
@@ -170,4 +173,4 @@ def search_band(
         ],
         axis=1,
     )
-    return BandHits(band, scale * cfg.patch_size, boxes, decision.ravel())
+    return BandHits(band, scale * cfg.patch_size, boxes, decision.ravel(), verified)
