@@ -63,9 +63,7 @@ class VehicleDetector:
         self.verifier = verifier
         self.config = config if config is not None else DetectorConfig()
         self.weights = LinearWeights.from_model(model)
-        self.verifier_weights = (
-            LinearWeights.from_model(verifier) if verifier is not None else None
-        )
+        self.verifier_weights = LinearWeights.from_model(verifier) if verifier is not None else None
         self.keep_debug = keep_debug
         self.heatmap = Heatmap(self.config.heat)
         # Region boxes come from heat averaged over the recent frames: centred that far back.
