@@ -124,6 +124,8 @@ def _verifier(value: str | None) -> dict[str, Any]:
     """The --verifier option as `build_stages` keywords: a file, the shipped one, or 'none'."""
     if value is not None and value.lower() == "none":
         return {"verify": False}
+    if value is not None and not Path(value).is_file():
+        raise InputError(f"--verifier {value} does not exist; give a model file or 'none'")
     return {"verifier": Path(value) if value is not None else None}
 
 

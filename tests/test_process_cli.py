@@ -135,3 +135,12 @@ def test_corrupt_model_is_refused(test_video: Path, tmp_path: Path) -> None:
     bad.write_bytes(b"PK\x03\x04 truncated")
     result = run_cli("evaluate-classifier", "--data", tmp_path, "--model", bad)
     assert_one_line_error(result, "corrupt")
+
+
+def test_a_missing_verifier_is_named(data_dir: Path, tmp_path: Path) -> None:
+    still = data_dir / "test_images" / "test1.jpg"
+    out = tmp_path / "o.jpg"
+    result = run_cli("process", still, "-o", out, "--verifier", tmp_path / "none.npz")
+    assert_one_line_error(result, "--verifier", "does not exist", "'none'")
+    assert not out.exists()
+    assert run_cli("process", still, "-o", out, "--verifier", "none").returncode == 0
