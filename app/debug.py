@@ -48,8 +48,9 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
 
 
 def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
-    """The scene geometry on the frame: the live box (green), the horizon (blue: estimated from
-    the footage; grey: the default or --horizon)."""
+    """The scene geometry on the frame: the live box (green; its bottom is labelled when a
+    bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
+    --horizon)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -58,6 +59,10 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     cv2.line(picture, (x0, y), (x1 - 1, y), color, 2, cv2.LINE_AA)
     label = "horizon (estimated)" if scene.estimated else "horizon (default)"
     cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
+    if scene.bonnet_y is not None:
+        cv2.putText(
+            picture, "bonnet", (x0 + 10, y1 + 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 255, 0), 2
+        )
     return picture
 
 

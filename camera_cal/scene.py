@@ -1,10 +1,11 @@
 """Scene geometry from the footage itself: the live part of the picture and the horizon.
 
-A dashcam's picture may carry black bars (a 4:3 sensor in a 16:9 file, a letterbox) and its
-horizon sits wherever the camera's height and pitch put it. Both are read off the frames: bars are
-rows and columns that stay black in every frame seen; the horizon is the row of the vanishing
-point of the road's straight edges (lane lines, kerbs, barriers), the median over recent frames,
-and the caller's default until there is enough evidence.
+A dashcam's picture may carry black bars (a 4:3 sensor in a 16:9 file, a letterbox) and a bonnet
+at its bottom, and its horizon sits wherever the camera's height and pitch put it. All are read off
+the frames: bars are rows and columns that stay black in every frame seen; a bonnet is the band of
+bottom rows that stays still while the road above it streams past; the horizon is the row of the
+vanishing point of the road's straight edges (lane lines, kerbs, barriers), the median over
+recent frames, and the caller's default until there is enough evidence.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ class SceneGeometry:
     horizon_y: float
     live: Box
     estimated: bool = False  # the horizon came from the footage (not the default)
+    bonnet_y: int | None = None  # top row of the bonnet (the live box ends there), if one is seen
 
 
 def scale_height(live_size: tuple[int, int]) -> float:
@@ -50,6 +52,38 @@ def live_box(row_max: NDArray[np.uint8], col_max: NDArray[np.uint8], dark: int =
     if len(rows) == 0 or len(cols) == 0:
         return 0, 0, len(col_max), len(row_max)
     return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
+
+
+def bonnet_row(
+    motion: NDArray[np.float64],
+    min_height: float = 0.03,
+    reach: float = 0.35,
+    ratio: float = 0.25,
+    min_motion: float = 1.0,
+) -> int | None:
+    """The top row of a bonnet from `motion`, the typical change of each row of the picture
+    between frames a few apart, or None: the highest row, `min_height` to `reach` of the height
+    up, from which the rows down to the bottom (but the last 1 %; a tenth may be reflections)
+    change less than `ratio` of the road's rows above it. The road streams past a moving camera
+    and changes; the bonnet moves with it and does not. The test is strict (a thin, reflective
+    bonnet may go unseen) since a still, smooth road must not be taken for a bonnet."""
+    h = len(motion)
+    k = max(1, round(0.01 * h))
+    smooth = np.convolve(np.asarray(motion, np.float64), np.ones(k) / k, mode="same")
+    above = max(2, round(0.08 * h))
+    first, last = max(above, round((1 - reach) * h)), h - max(1, round(min_height * h))
+    if last < first:
+        return None
+    rows = np.arange(first, last + 1)
+    # The road's motion just above each candidate row, and how many rows below it (to the last
+    # 1 %) move at least `ratio` of that: at most a tenth may (reflections, the bonnet's edge).
+    road = np.median(np.lib.stride_tricks.sliding_window_view(smooth, above), axis=1)[rows - above]
+    below = (np.arange(h)[None, :] >= rows[:, None]) & (np.arange(h)[None, :] < h - k)
+    moving = (smooth[None, :] >= ratio * road[:, None]) & below
+    still = moving.sum(axis=1) <= 0.1 * np.maximum(below.sum(axis=1), 1)
+    still &= smooth[rows] < ratio * road  # the bonnet's top row itself too
+    found = np.flatnonzero(still & (road >= min_motion))
+    return int(rows[found[0]]) if len(found) else None
 
 
 def road_segments(grey: NDArray[np.uint8], live: Box, top: int) -> NDArray[np.float64]:
@@ -104,7 +138,8 @@ def vanishing_point(
 
 class SceneTracker:
     """History for the scene geometry: the brightest value seen per row and column (for the
-    bars) and the recent vanishing points (for the horizon).
+    bars), each row's change between frames `motion_every` apart (for a bonnet) and the recent
+    vanishing points (for the horizon).
 
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
     `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
@@ -122,6 +157,9 @@ class SceneTracker:
         every: int = 3,
         settle: float = 0.015,
         fixed_scale: float | None = None,
+        motion_every: int = 3,
+        motion_window: int = 60,
+        min_motion_samples: int = 10,
     ) -> None:
         self.size = size
         self.fixed_scale = fixed_scale
@@ -134,15 +172,48 @@ class SceneTracker:
         self._row_max = np.zeros(size[1], np.uint8)
         self._col_max = np.zeros(size[0], np.uint8)
         self._count = 0
+        self.motion_every = motion_every
+        self.min_motion_samples = min_motion_samples
+        self._motion: deque[NDArray[np.float64]] = deque(maxlen=motion_window)
+        self._previous: NDArray[np.int16] | None = None
+        self._bonnet: int | None = None
+        self._samples = 0
         self._current = SceneGeometry(
             size, fixed_horizon if fixed_horizon is not None else default_horizon, self._box()
         )
-        self._placed = (self._current.horizon_y, self._current.live)
+        self._placed = (self._current.horizon_y, self._current.live, self._current.live)
 
-    def _box(self) -> Box:
+    def _picture(self) -> Box:
+        """The box inside the bars."""
         if not self._count:
             return 0, 0, self.size[0], self.size[1]
         return live_box(self._row_max, self._col_max)
+
+    def _box(self) -> Box:
+        """The live box: inside the bars and above the bonnet."""
+        x0, y0, x1, y1 = self._picture()
+        if self._bonnet is not None and y0 + (y1 - y0) // 2 < self._bonnet < y1:
+            y1 = self._bonnet
+        return x0, y0, x1, y1
+
+    def _track_motion(self, grey: NDArray[np.uint8]) -> None:
+        """Add how much each row changed since the last sample (every 4th column inside the
+        bars); every `min_motion_samples` samples, place the bonnet from the median change."""
+        sample = grey[:, ::4].astype(np.int16)
+        previous, self._previous = self._previous, sample
+        if previous is None:
+            return
+        x0, y0, x1, y1 = self._picture()
+        columns = slice(-(-x0 // 4), max(-(-x0 // 4) + 1, x1 // 4))
+        self._motion.append(np.abs(sample[:, columns] - previous[:, columns]).mean(axis=1))
+        self._samples += 1
+        if self._samples % self.min_motion_samples == 0:
+            profile = np.median(np.stack(self._motion), axis=0)[y0:y1]
+            top = bonnet_row(profile)
+            # A bonnet does not go away (a still road, the car stopped, only hides it) nor grow:
+            # its top is the highest row found still while the road moved.
+            if top is not None:
+                self._bonnet = min(y0 + top, self._bonnet or y1)
 
     @property
     def current(self) -> SceneGeometry:
@@ -155,6 +226,8 @@ class SceneTracker:
         # Bars: sample every 4th row and column (bars are wide; this costs ~1 ms).
         np.maximum(self._row_max, grey[:, ::4].max(axis=1), out=self._row_max)
         np.maximum(self._col_max, grey[::4].max(axis=0), out=self._col_max)
+        if self._count % self.motion_every == 0:
+            self._track_motion(grey)
         # Every frame until the first estimate stands (the stages use the default until then),
         # then every few.
         due = self._count % self.every == 0 or len(self._estimates) < self.min_estimates
@@ -168,14 +241,15 @@ class SceneTracker:
             horizon, estimated = float(np.median(self._estimates)), True
         else:
             horizon, estimated = self.default_horizon, False
-        self._current = SceneGeometry(self.size, horizon, live, estimated)
+        bonnet = self._bonnet if live[3] == self._bonnet else None
+        self._current = SceneGeometry(self.size, horizon, live, estimated, bonnet)
         tolerance = self.settle * self.size[1]
-        placed_horizon, placed_live = self._placed
+        placed_horizon, placed_live, _ = self._placed
         moved = abs(horizon - placed_horizon) > tolerance or any(
             abs(a - b) > tolerance for a, b in zip(live, placed_live, strict=True)
         )
         if moved:
-            self._placed = (horizon, live)
+            self._placed = (horizon, live, self._picture())
         return self._current
 
     @property
@@ -183,10 +257,11 @@ class SceneTracker:
         """The horizon, live box and scale height as the stages place their work by (their
         `process` keywords): they follow the estimate in steps of more than `settle` of the
         height, so its wobble neither restarts the lanes' history nor moves the vehicle bands."""
-        horizon, (x0, y0, x1, y1) = self._placed
+        horizon, live, (x0, y0, x1, y1) = self._placed
         return {
             "horizon_y": horizon,
-            "live": (x0, y0, x1, y1),
+            "live": live,
+            # The scale is the picture's inside the bars: a bonnet hides road, not lens.
             "scale_height": scale_height((x1 - x0, y1 - y0))
             if self.fixed_scale is None
             else self.fixed_scale,

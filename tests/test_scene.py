@@ -12,6 +12,7 @@ import pytest
 from app.sources import probe_video, read_frames
 from camera_cal.scene import (
     SceneTracker,
+    bonnet_row,
     live_box,
     road_segments,
     scale_height,
@@ -162,3 +163,59 @@ def test_an_unknown_camera_waits_for_its_horizon(wild_dir: Path, tmp_path: Path)
     assert not any(r["lane"] or r["vehicles"] for r in waited)
     assert all(abs(r["horizon_y"] - default) > 0.2 * default for r in placed)
     assert sum(1 for r in placed if r["lane"]) >= 0.9 * len(placed)
+
+
+def _moving_road(size: tuple[int, int], frames: int, bonnet: int | None) -> list[Frame]:
+    """Frames of a textured road streaming down the picture (as under a moving camera), with a
+    still, smooth bonnet from row `bonnet` down when given."""
+    w, h = size
+    rng = np.random.default_rng(7)
+    texture = cv2.resize(
+        rng.integers(40, 200, (h // 4 + frames * 2, w // 4), np.uint8), None, fx=4, fy=4
+    )
+    out = []
+    for t in range(frames):
+        grey = texture[(frames - t) * 8 : (frames - t) * 8 + h]
+        frame = np.repeat(grey[:, :, None], 3, axis=2).copy()
+        if bonnet is not None:
+            frame[bonnet:] = (200, 200, 205)
+        out.append(frame)
+    return out
+
+
+def test_a_bonnet_ends_the_live_picture_and_a_moving_road_does_not() -> None:
+    size = (320, 240)
+    motion = np.r_[np.full(200, 8.0), np.full(40, 0.5)]
+    assert bonnet_row(motion) in range(197, 203)
+    assert bonnet_row(np.full(240, 8.0)) is None  # all road
+    assert bonnet_row(np.full(240, 0.2)) is None  # a still road (stopped): no evidence
+    assert bonnet_row(np.r_[np.full(200, 8.0), np.linspace(8.0, 3.0, 40)]) is None  # smooth asphalt
+    for bonnet in (190, None):
+        tracker = SceneTracker(size, default_horizon=120.0)
+        for frame in _moving_road(size, 90, bonnet):
+            scene = tracker.update(frame)
+        if bonnet is None:
+            assert scene.bonnet_y is None and scene.live[3] == 240
+        else:
+            assert scene.bonnet_y is not None and abs(scene.bonnet_y - bonnet) <= 3
+            assert scene.live[3] == scene.bonnet_y
+        # The scale stays the picture's: a bonnet hides road, not lens.
+        assert tracker.placement["scale_height"] == scale_height((320, 240))
+
+
+@pytest.mark.parametrize(
+    ("clip", "rows"),
+    [("la_freeway_minidashcam_2", range(400, 426)), ("india_highway_wildfilms", None)],
+)
+def test_the_bonnet_of_a_wild_clip(wild_dir: Path, clip: str, rows: range | None) -> None:
+    """The LA dashcam shows its white bonnet from about row 415 of 480 (seen by eye); the Indian
+    highway clip shows none, and its smooth asphalt at the bottom is not taken for one."""
+    video = wild_dir / f"{clip}.mp4"
+    info = probe_video(video)
+    tracker = SceneTracker(info.size, default_horizon=0.55 * info.size[1])
+    for frame in read_frames(video, info, 0, 240):
+        scene = tracker.update(frame)
+    if rows is None:
+        assert scene.bonnet_y is None
+    else:
+        assert scene.bonnet_y in rows and scene.live[3] == scene.bonnet_y
