@@ -21,7 +21,9 @@ from camera_cal import SceneGeometry
 from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
 
-WARMUP_FRAMES = 30  # frames run before the first chosen one so history is as in a real run
+# Seconds run before the first chosen frame so history is as in a real run: an unknown camera's
+# stages wait up to 3 s for the horizon, and its bonnet is placed after 1 s.
+WARMUP_S = 4.0
 SCALE_COLORS = [(255, 80, 80), (255, 200, 0), (80, 255, 80), (0, 200, 255), (200, 80, 255)]
 
 
@@ -164,7 +166,7 @@ def run_debug(
     last = min(last, info.n_frames)
     check_horizon(pipeline.horizon_y, info.size)
     ensure_writable_dir(out_dir)
-    start = max(0, first - WARMUP_FRAMES)
+    start = max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)
     annotators = default_annotators(insets=True)
     written: list[Path] = []

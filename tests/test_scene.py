@@ -219,3 +219,22 @@ def test_the_bonnet_of_a_wild_clip(wild_dir: Path, clip: str, rows: range | None
         assert scene.bonnet_y is None
     else:
         assert scene.bonnet_y in rows and scene.live[3] == scene.bonnet_y
+
+
+def test_debug_of_an_unknown_camera_runs_long_enough_to_place_its_stages(
+    wild_dir: Path, tmp_path: Path
+) -> None:
+    """Stepping to a frame of a camera without calibration warms up past the wait for its
+    horizon: the frame gets the lane and vehicle intermediates, and the scene its bonnet."""
+    out = tmp_path / "dbg"
+    video = wild_dir / "la_freeway_minidashcam_2.mp4"
+    result = run_cli("debug", video, "--frames", "200", "--out", out, "--calibration", "none")
+    assert result.returncode == 0, result.stderr
+    names = sorted(p.name for p in (out / "frame_000200").iterdir())
+    assert any("birdseye_fit" in n for n in names) and any("window_hits" in n for n in names)
+    scene = cv2.imread(str(next((out / "frame_000200").glob("*_scene.png"))))
+    assert scene is not None
+    # The live box's bottom edge (green) is drawn at the bonnet's top, not at the frame's bottom.
+    green = (scene[:, :, 1] > 200) & (scene[:, :, 0] < 60) & (scene[:, :, 2] < 60)
+    rows = np.flatnonzero(green[:, 100:750].mean(axis=1) > 0.9)
+    assert any(400 <= r <= 426 for r in rows)
