@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
 from app.drivers import check_horizon
 from app.errors import InputError
-from app.pipeline import FrameOutput, FrameResult, Pipeline
+from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
 from app.sources import Frame, probe_video, read_frames
 from camera_cal import SceneGeometry
@@ -22,8 +22,8 @@ from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
 
 # Seconds run before the first chosen frame so history is as in a real run: an unknown camera's
-# stages wait up to 3 s for the horizon, and its bonnet is placed after 1 s.
-WARMUP_S = 4.0
+# stages wait for the horizon, and its bonnet is placed within a second.
+WARMUP_S = HORIZON_WAIT_S + 1.0
 SCALE_COLORS = [(255, 80, 80), (255, 200, 0), (80, 255, 80), (0, 200, 255), (200, 80, 255)]
 
 

@@ -159,7 +159,7 @@ class SceneTracker:
         fixed_scale: float | None = None,
         motion_every: int = 3,
         motion_window: int = 60,
-        min_motion_samples: int = 10,
+        bonnet_every: int = 10,
     ) -> None:
         self.size = size
         self.fixed_scale = fixed_scale
@@ -173,7 +173,7 @@ class SceneTracker:
         self._col_max = np.zeros(size[0], np.uint8)
         self._count = 0
         self.motion_every = motion_every
-        self.min_motion_samples = min_motion_samples
+        self.bonnet_every = bonnet_every
         self._motion: deque[NDArray[np.float64]] = deque(maxlen=motion_window)
         self._previous: NDArray[np.int16] | None = None
         self._bonnet: int | None = None
@@ -198,7 +198,7 @@ class SceneTracker:
 
     def _track_motion(self, grey: NDArray[np.uint8]) -> None:
         """Add how much each row changed since the last sample (every 4th column inside the
-        bars); every `min_motion_samples` samples, place the bonnet from the median change."""
+        bars); every `bonnet_every` samples, place the bonnet from the median change."""
         sample = grey[:, ::4].astype(np.int16)
         previous, self._previous = self._previous, sample
         if previous is None:
@@ -207,7 +207,7 @@ class SceneTracker:
         columns = slice(-(-x0 // 4), max(-(-x0 // 4) + 1, x1 // 4))
         self._motion.append(np.abs(sample[:, columns] - previous[:, columns]).mean(axis=1))
         self._samples += 1
-        if self._samples % self.min_motion_samples == 0:
+        if self._samples % self.bonnet_every == 0:
             profile = np.median(np.stack(self._motion), axis=0)[y0:y1]
             top = bonnet_row(profile)
             # A bonnet does not go away (a still road, the car stopped, only hides it) nor grow:
