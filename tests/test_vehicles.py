@@ -17,7 +17,7 @@ from camera_cal import build_undistorter, default_calibration_path, load_calibra
 from tests.helpers import process_clip
 from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
 from vehicles.detections import Detections
-from vehicles.detector import VehicleDetector
+from vehicles.detector import VehicleDetector, extend_left
 from vehicles.features import patch_features
 from vehicles.heatmap import Heatmap
 from vehicles.model import VehicleModel, default_model_path, load_model
@@ -182,6 +182,14 @@ def test_heatmap_box_of_a_vehicle_at_the_frame_side_covers_its_inner_part() -> N
     assert len(narrow) == len(found) == 1
     assert narrow[0][0] >= 1200  # the usual cut-off keeps only the piled-up part
     assert iou(found[0], [1168, 420, 1280, 540]) > 0.9
+
+
+def test_region_boxes_reach_further_left_but_not_past_the_live_picture() -> None:
+    boxes = np.array([[300.0, 400.0, 400.0, 460.0], [10.0, 400.0, 110.0, 460.0]])
+    out = extend_left(boxes, 0.08, x_min=5.0)
+    # 8 % of the 100 px width further left; the second box stops at the live picture's side.
+    assert out[:, 0].tolist() == [292.0, 5.0]
+    assert (out[:, 1:] == boxes[:, 1:]).all() and boxes[0, 0] == 300.0  # input untouched
 
 
 def test_track_ids_stay_constant_on_a_moving_box() -> None:

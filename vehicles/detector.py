@@ -43,6 +43,14 @@ def footprint(
     return np.asarray(np.tile(boxes[:, :2], 2) + size * np.asarray(part))
 
 
+def extend_left(boxes: NDArray[np.float64], share: float, x_min: float) -> NDArray[np.float64]:
+    """The boxes with their left edges moved `share` of their width further left, not past
+    `x_min`."""
+    out = boxes.copy()
+    out[:, 0] = np.maximum(boxes[:, 0] - share * (boxes[:, 2] - boxes[:, 0]), x_min)
+    return out
+
+
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -152,7 +160,7 @@ class VehicleDetector:
         heated = footprint(boxes[strong], cfg.heat_footprint) - offset
         frame_heat = self.heatmap.add((lx1 - lx0, ly1 - ly0), heated, weight)
         region_boxes, peaks = self.heatmap.regions()
-        region_boxes = region_boxes + offset
+        region_boxes = extend_left(region_boxes + offset, cfg.left_extension, lx0)
         big = (
             np.minimum(
                 region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
