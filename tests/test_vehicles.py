@@ -185,10 +185,13 @@ def test_heatmap_box_of_a_vehicle_at_the_frame_side_covers_its_inner_part() -> N
 
 
 def test_region_boxes_reach_further_left_but_not_past_the_live_picture() -> None:
-    boxes = np.array([[300.0, 400.0, 400.0, 460.0], [10.0, 400.0, 110.0, 460.0]])
-    out = extend_left(boxes, 0.08, x_min=5.0)
-    # 8 % of the 100 px width further left; the second box stops at the live picture's side.
-    assert out[:, 0].tolist() == [292.0, 5.0]
+    boxes = np.array(
+        [[300.0, 400.0, 400.0, 460.0], [10.0, 400.0, 110.0, 460.0], [1180.0, 400.0, 1275.0, 460.0]]
+    )
+    out = extend_left(boxes, 0.08, x_min=5.0, x_max=1275.0)
+    # 8 % of the 100 px width further left; the second box stops at the live picture's left side;
+    # the third, at its right side, keeps its edge (a side region's width is measured otherwise).
+    assert out[:, 0].tolist() == [292.0, 5.0, 1180.0]
     assert (out[:, 1:] == boxes[:, 1:]).all() and boxes[0, 0] == 300.0  # input untouched
 
 

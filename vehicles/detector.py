@@ -43,11 +43,16 @@ def footprint(
     return np.asarray(np.tile(boxes[:, :2], 2) + size * np.asarray(part))
 
 
-def extend_left(boxes: NDArray[np.float64], share: float, x_min: float) -> NDArray[np.float64]:
-    """The boxes with their left edges moved `share` of their width further left, not past
-    `x_min`."""
+def extend_left(
+    boxes: NDArray[np.float64], share: float, x_min: float, x_max: float
+) -> NDArray[np.float64]:
+    """The boxes inside (x_min, x_max) with their left edges moved `share` of their width further
+    left, not past `x_min`; a box at either side stays as it is (its width is measured at a lower
+    share of its peak heat already: see `Heatmap.regions`)."""
+    inside = (boxes[:, 0] > x_min) & (boxes[:, 2] < x_max)
+    moved = np.maximum(boxes[:, 0] - share * (boxes[:, 2] - boxes[:, 0]), x_min)
     out = boxes.copy()
-    out[:, 0] = np.maximum(boxes[:, 0] - share * (boxes[:, 2] - boxes[:, 0]), x_min)
+    out[:, 0] = np.where(inside, moved, boxes[:, 0])
     return out
 
 
@@ -160,7 +165,7 @@ class VehicleDetector:
         heated = footprint(boxes[strong], cfg.heat_footprint) - offset
         frame_heat = self.heatmap.add((lx1 - lx0, ly1 - ly0), heated, weight)
         region_boxes, peaks = self.heatmap.regions()
-        region_boxes = extend_left(region_boxes + offset, cfg.left_extension, lx0)
+        region_boxes = extend_left(region_boxes + offset, cfg.left_extension, lx0, lx1)
         big = (
             np.minimum(
                 region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
