@@ -268,19 +268,25 @@ class _AtomicSink:
 
 class VideoSink(_AtomicSink):
     """`with VideoSink(path, size, fps) as sink: sink.write(frame)`: an encoded video (codec by
-    the name's suffix, `audio` copied in) that appears only if the block succeeds."""
+    the name's suffix, `audio` copied in, x264 `preset`) that appears only if the block
+    succeeds."""
 
     def __init__(
-        self, path: Path, size: tuple[int, int], fps: float, audio: AudioSpan | None = None
+        self,
+        path: Path,
+        size: tuple[int, int],
+        fps: float,
+        audio: AudioSpan | None = None,
+        preset: str = "ultrafast",
     ) -> None:
         super().__init__(path)
         container_for(self.path)  # an impossible container is refused before any work
-        self._settings = (size, fps, audio)
+        self._settings = (size, fps, audio, preset)
         self._writer: VideoWriter | None = None
 
     def __enter__(self) -> VideoSink:
-        size, fps, audio = self._settings
-        self._writer = VideoWriter(self._open(), size, fps, audio)
+        size, fps, audio, preset = self._settings
+        self._writer = VideoWriter(self._open(), size, fps, audio, preset)
         return self
 
     def write(self, frame: Frame) -> None:
