@@ -52,7 +52,7 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
 def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     """The scene geometry on the frame: the live box (green; its bottom is labelled when a
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
-    --horizon)."""
+    --horizon) and the road's vanishing point on it (a circle, once estimated)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -61,6 +61,8 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     cv2.line(picture, (x0, y), (x1 - 1, y), color, 2, cv2.LINE_AA)
     label = "horizon (estimated)" if scene.estimated else "horizon (default)"
     cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
+    if scene.vanishing_x is not None:
+        cv2.circle(picture, (round(scene.vanishing_x), y), 9, color, 2, cv2.LINE_AA)
     if scene.bonnet_y is not None:
         cv2.putText(
             picture, "bonnet", (x0 + 10, y1 + 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 255, 0), 2

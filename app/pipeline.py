@@ -66,9 +66,10 @@ def _scene_warp(
     horizon_y: float,
     live: tuple[int, int, int, int],
     scale_height: float,
+    vanishing_x: float | None,
 ) -> BirdsEye:
     """The default lane config's warp for a scene placement (built once per placement)."""
-    return birdseye_for(size, LaneConfig(), horizon_y, live, scale_height)
+    return birdseye_for(size, LaneConfig(), horizon_y, live, scale_height, vanishing_x)
 
 
 @dataclass(frozen=True, eq=False)

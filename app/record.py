@@ -64,6 +64,7 @@ def frame_record(
     record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4), "size": list(size)}
     if result.scene is not None:
         record["horizon_y"] = round(result.scene.horizon_y, 1)
+        record["vanishing_x"] = _rounded(result.scene.vanishing_x, 1)
     facts = result.facts
     if result.vehicles is not None:
         vehicles = vehicles_record(result.vehicles.detections)

@@ -12,8 +12,8 @@ class FrameStage(Protocol):
     """A stage sees every undistorted RGB frame in order and may keep history between frames.
 
     `process` also takes the scene as plain values (the horizon row, the live box inside black
-    bars, the height its tuned fractions are of): the stages do not import the scene module,
-    nor each other."""
+    bars, the height its tuned fractions are of, the road's vanishing point's column): the stages
+    do not import the scene module, nor each other."""
 
     def process(
         self,
@@ -21,6 +21,7 @@ class FrameStage(Protocol):
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        vanishing_x: float | None = None,
     ) -> object:
         """Analyse one frame; history classes update here."""
         ...

@@ -31,6 +31,9 @@ class SceneGeometry:
     live: Box
     estimated: bool = False  # the horizon came from the footage (not the default)
     bonnet_y: int | None = None  # top row of the bonnet (the live box ends there), if one is seen
+    # The road's vanishing point's column (a camera turned sideways, or a picture cut off-centre,
+    # puts it off the live box's centre); None until measured.
+    vanishing_x: float | None = None
 
 
 def scale_height(live_size: tuple[int, int]) -> float:
@@ -168,7 +171,7 @@ class SceneTracker:
         self.min_estimates = min_estimates
         self.every = every
         self.settle = settle
-        self._estimates: deque[float] = deque(maxlen=window)
+        self._estimates: deque[tuple[float, float]] = deque(maxlen=window)  # (x, y)
         self._row_max = np.zeros(size[1], np.uint8)
         self._col_max = np.zeros(size[0], np.uint8)
         self._count = 0
@@ -182,6 +185,7 @@ class SceneTracker:
             size, fixed_horizon if fixed_horizon is not None else default_horizon, self._box()
         )
         self._placed = (self._current.horizon_y, self._current.live, self._current.live)
+        self._placed_x: float | None = None  # the vanishing point's column, placed on its own
 
     def _picture(self) -> Box:
         """The box inside the bars."""
@@ -235,14 +239,17 @@ class SceneTracker:
         if self.fixed_horizon is None and due:
             self._measure(grey, live)
         self._count += 1
+        vanishing_x = None
         if self.fixed_horizon is not None:
             horizon, estimated = self.fixed_horizon, False
         elif len(self._estimates) >= self.min_estimates:
-            horizon, estimated = float(np.median(self._estimates)), True
+            xs, ys = np.array(self._estimates).T
+            horizon, estimated = float(np.median(ys)), True
+            vanishing_x = float(np.median(xs))
         else:
             horizon, estimated = self.default_horizon, False
         bonnet = self._bonnet if live[3] == self._bonnet else None
-        self._current = SceneGeometry(self.size, horizon, live, estimated, bonnet)
+        self._current = SceneGeometry(self.size, horizon, live, estimated, bonnet, vanishing_x)
         tolerance = self.settle * self.size[1]
         placed_horizon, placed_live, _ = self._placed
         moved = abs(horizon - placed_horizon) > tolerance or any(
@@ -250,16 +257,23 @@ class SceneTracker:
         )
         if moved:
             self._placed = (horizon, live, self._picture())
+        # The column follows in steps of its own: it places the lanes' warp, not the bands.
+        if vanishing_x is not None and (
+            self._placed_x is None or abs(vanishing_x - self._placed_x) > tolerance
+        ):
+            self._placed_x = vanishing_x
         return self._current
 
     @property
     def placement(self) -> dict[str, Any]:
-        """The horizon, live box and scale height as the stages place their work by (their
-        `process` keywords): they follow the estimate in steps of more than `settle` of the
-        height, so its wobble neither restarts the lanes' history nor moves the vehicle bands."""
+        """The horizon, vanishing point's column, live box and scale height as the stages place
+        their work by (their `process` keywords): they follow the estimate in steps of more than
+        `settle` of the height, so its wobble neither restarts the lanes' history nor moves the
+        vehicle bands."""
         horizon, live, (x0, y0, x1, y1) = self._placed
         return {
             "horizon_y": horizon,
+            "vanishing_x": self._placed_x,
             "live": live,
             # The scale is the picture's inside the bars: a bonnet hides road, not lens.
             "scale_height": scale_height((x1 - x0, y1 - y0))
@@ -268,8 +282,8 @@ class SceneTracker:
         }
 
     def _measure(self, grey: NDArray[np.uint8], live: Box) -> None:
-        """Add this frame's vanishing point row, when the road's edges give one (measured at
-        most 640 pixels wide: as exact, and four times cheaper on HD)."""
+        """Add this frame's vanishing point, when the road's edges give one (measured at most
+        640 pixels wide: as exact, and four times cheaper on HD)."""
         scale = min(1.0, MEASURE_WIDTH / grey.shape[1])
         if scale < 1.0:
             grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
@@ -283,4 +297,4 @@ class SceneTracker:
             return
         x, y = point
         if x0 <= x < x1 and y0 + 0.15 * h <= y <= y0 + 0.8 * h:
-            self._estimates.append(float(y) / scale)
+            self._estimates.append((float(x) / scale, float(y) / scale))

@@ -84,10 +84,12 @@ class LaneFinder:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        vanishing_x: float | None = None,
     ) -> BirdsEye:
         """The bird's-eye warp for this frame size and scene (the config's horizon, the whole
-        frame and its height when not given), kept while they stay the same (the app passes a
-        scene that moves in steps): a new warp starts the lines' history afresh."""
+        frame and its height when not given; the live centre's column for the vanishing point),
+        kept while they stay the same (the app passes a scene that moves in steps): a new warp
+        starts the lines' history afresh."""
         current = self._view
         if (
             current is not None
@@ -95,9 +97,12 @@ class LaneFinder:
             and horizon_y in (None, current.horizon_y)
             and live in (None, current.live)
             and scale_height in (None, current.scale_height)
+            and vanishing_x == current.vanishing_x
         ):
             return current
-        self._view = birdseye_for(frame_size, self.config, horizon_y, live, scale_height)
+        self._view = birdseye_for(
+            frame_size, self.config, horizon_y, live, scale_height, vanishing_x
+        )
         if current is not None:
             self.reset()
         return self._view
@@ -113,11 +118,14 @@ class LaneFinder:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        vanishing_x: float | None = None,
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
-        from the scene's `horizon_y`, `live` box and `scale_height` when given)."""
+        from the scene's `horizon_y`, `live` box, `scale_height` and `vanishing_x` when given)."""
         cfg = self.config
-        view = self.view((frame.shape[1], frame.shape[0]), horizon_y, live, scale_height)
+        view = self.view(
+            (frame.shape[1], frame.shape[0]), horizon_y, live, scale_height, vanishing_x
+        )
         bw, bh = view.size
         birdseye = view.warp(frame)
         advance = self.motion.update(birdseye, view.ym_per_px)

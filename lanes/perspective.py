@@ -24,6 +24,7 @@ class BirdsEye:
     horizon_y: float  # where the trapezoid's sides meet
     live: tuple[int, int, int, int]  # the live box the trapezoid was placed in
     scale_height: float  # the 16:9 height the tuned trapezoid was sized for
+    vanishing_x: float | None = None  # the column the sides meet in (None: the live centre's)
 
     def warp(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The bird's-eye view of a frame."""
@@ -73,6 +74,7 @@ def birdseye_for(
     horizon_y: float | None = None,
     live: tuple[int, int, int, int] | None = None,
     scale_height: float | None = None,
+    vanishing_x: float | None = None,
 ) -> BirdsEye:
     """The warp for frames of `frame_size`: the config's trapezoid, moved to the scene.
 
@@ -80,6 +82,9 @@ def birdseye_for(
     that the vanishing point sits on `horizon_y`, centred in the live box, and its bottom at the
     config's share of the live height: lane lines through the vanishing point stay on it, and a
     lane's width in pixels grows with the distance below the horizon as it does for any lens.
+    With `vanishing_x` (a camera turned sideways, a picture cut off-centre) the trapezoid is
+    sheared about its bottom row so that its sides meet in that column: the road's lines, which
+    meet there, stay upright in the bird's-eye view while its bottom stays around the car.
 
     Along the road the scale needs the focal length, which a flat road does not reveal (a lens
     twice as long on a road twice as stretched gives the same picture): `scale_height` is the
@@ -99,6 +104,8 @@ def birdseye_for(
     scale = max((bottom - horizon) / (config.src_bottom_y * ref_h - apex[1]), 0.2)
     centre = (lx0 + lx1) / 2 + apex[0] - ref_w / 2
     src = np.array([centre, horizon]) + scale * (reference - apex)
+    if vanishing_x is not None and bottom > horizon:
+        src[:, 0] += (vanishing_x - centre) * (bottom - src[:, 1]) / (bottom - horizon)
     bw, bh = round(ref_w * config.warp_width), round(ref_h * config.warp_height)
     dst = np.array(
         [
@@ -125,4 +132,5 @@ def birdseye_for(
         horizon_y=float(horizon),
         live=(lx0, ly0, lx1, ly1),
         scale_height=ref_h,
+        vanishing_x=vanishing_x,
     )

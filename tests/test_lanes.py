@@ -150,3 +150,32 @@ def test_the_finder_believes_only_a_lane_a_road_can_have(
     right = np.array([a, right_b, right_c])
     doubt = implausible_lane(left, right, rows, xm, ym, (2.6, 5.6), 1.8, 50.0)
     assert (doubt is None) if why is None else (doubt is not None and why in doubt), doubt
+
+
+def test_a_camera_turned_sideways_keeps_the_road_upright_in_the_birdseye_view() -> None:
+    # The road's vanishing point 150 px left of the picture's centre (a camera turned right).
+    size, vp = (960, 540), (330.0, 250.0)
+    turned = birdseye_for(size, LaneConfig(), horizon_y=vp[1], vanishing_x=vp[0])
+    centred = birdseye_for(size, LaneConfig(), horizon_y=vp[1])
+    rows = np.linspace(539, vp[1] + 0.2 * (539 - vp[1]), 12)
+    for x_bottom in (300.0, 700.0):  # a road line either side of the car, through the VP
+        line = np.column_stack([vp[0] + (x_bottom - vp[0]) * (rows - vp[1]) / (539 - vp[1]), rows])
+        assert np.ptp(turned.to_birdseye(line)[:, 0]) < 1.0  # upright
+        assert np.ptp(centred.to_birdseye(line)[:, 0]) > 50  # slanted across the view
+    # The view's bottom stays around the car: the bottom row maps as without the turn.
+    bottom = np.array([[300.0, 513.0], [700.0, 513.0]])
+    np.testing.assert_allclose(turned.to_birdseye(bottom), centred.to_birdseye(bottom), atol=1e-6)
+
+
+@pytest.mark.slow
+def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
+    wild_dir: Path, tmp_path: Path
+) -> None:
+    # The Indian highway's camera looks right of the road: its vanishing point is at 35-45 % of
+    # the width. With the warp upright on it a lane is found in 82 % of the frames (65 % with
+    # the warp centred, where the lines ran slanted out of the search windows).
+    rows = process_clip(
+        wild_dir / "india_highway_wildfilms.mp4", tmp_path, "--no-vehicles", "--calibration", "none"
+    )
+    found = sum(r["lane"] is not None for r in rows)
+    assert found >= 0.8 * len(rows)

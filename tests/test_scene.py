@@ -57,6 +57,9 @@ def test_vanishing_point_and_bars_of_a_synthetic_road() -> None:
     geometries = [tracker.update(frame) for _ in range(8)]
     assert geometries[0].horizon_y == 300.0 and not geometries[0].estimated
     assert geometries[-1].estimated and abs(geometries[-1].horizon_y - vp[1]) < 4
+    column = geometries[-1].vanishing_x
+    assert geometries[0].vanishing_x is None and column is not None and abs(column - vp[0]) < 4
+    assert abs(tracker.placement["vanishing_x"] - vp[0]) < 4
     assert geometries[-1].live == live
     fixed = SceneTracker(size, default_horizon=300.0, fixed_horizon=222.0, every=1)
     assert all(fixed.update(frame).horizon_y == 222.0 for _ in range(8))
@@ -105,8 +108,12 @@ def test_horizon_in_the_record_and_the_override(test_video: Path, tmp_path: Path
     rows = process_clip(test_video, tmp_path, "--end", "0.8")
     horizons = [r["horizon_y"] for r in rows]
     assert all(400 < h < 440 for h in horizons)
+    # The shipped camera looks along the road: its vanishing point is near the centre column.
+    columns = [r["vanishing_x"] for r in rows if r["vanishing_x"] is not None]
+    assert columns and all(600 < x < 680 for x in columns)
     fixed = process_clip(test_video, tmp_path, "--end", "0.4", "--horizon", "380")
     assert {r["horizon_y"] for r in fixed} == {380.0}
+    assert {r["vanishing_x"] for r in fixed} == {None}
     assert_one_line_error(
         run_cli("process", test_video, "-o", tmp_path / "x.mp4", "--horizon", "720"),
         "--horizon 720 is outside the frame (720 rows)",

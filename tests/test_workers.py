@@ -34,6 +34,7 @@ class Counter:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        vanishing_x: float | None = None,
     ) -> Seen:
         self.count += 1
         if self.count == self.fail_at:

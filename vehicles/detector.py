@@ -95,9 +95,11 @@ class VehicleDetector:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        vanishing_x: float | None = None,
     ) -> View:
         """Where to search frames of `size`: the given horizon, live box and scale, or the
-        defaults (the whole frame, its height)."""
+        defaults (the whole frame, its height). The bands span the live box's width, wherever
+        the road's vanishing point (`vanishing_x`) is: it does not move them."""
         default = View.default(size, self.config.reference_horizon)
         box = default.live if live is None else live
         return View(
@@ -134,9 +136,11 @@ class VehicleDetector:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        vanishing_x: float | None = None,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
-        (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given)."""
+        (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given;
+        `vanishing_x` does not move them)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height)
