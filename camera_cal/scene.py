@@ -147,6 +147,9 @@ class SceneTracker:
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
     `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
     then, and every `every` frames after (it changes slowly; each costs a few milliseconds).
+    The stages' placement follows the horizon and live box in steps of `settle` of the height,
+    and the vanishing point's column in steps of `settle_x` of the live width (a bend ahead
+    moves it by a few per cent; a camera turned sideways by more).
     `fixed_scale` is the scale height of a calibrated lens; without it the live box gives it.
     """
 
@@ -163,6 +166,7 @@ class SceneTracker:
         motion_every: int = 3,
         motion_window: int = 60,
         bonnet_every: int = 10,
+        settle_x: float = 0.03,
     ) -> None:
         self.size = size
         self.fixed_scale = fixed_scale
@@ -171,6 +175,7 @@ class SceneTracker:
         self.min_estimates = min_estimates
         self.every = every
         self.settle = settle
+        self.settle_x = settle_x
         self._estimates: deque[tuple[float, float]] = deque(maxlen=window)  # (x, y)
         self._row_max = np.zeros(size[1], np.uint8)
         self._col_max = np.zeros(size[0], np.uint8)
@@ -257,9 +262,11 @@ class SceneTracker:
         )
         if moved:
             self._placed = (horizon, live, self._picture())
-        # The column follows in steps of its own: it places the lanes' warp, not the bands.
-        if vanishing_x is not None and (
-            self._placed_x is None or abs(vanishing_x - self._placed_x) > tolerance
+        # The column follows in steps of its own (from the live centre, where the stages put it
+        # without one): it places the lanes' warp, not the vehicle bands.
+        placed_x = (live[0] + live[2]) / 2 if self._placed_x is None else self._placed_x
+        if vanishing_x is not None and abs(vanishing_x - placed_x) > self.settle_x * (
+            live[2] - live[0]
         ):
             self._placed_x = vanishing_x
         return self._current
