@@ -19,11 +19,10 @@ from app.reframe import (
 )
 from camera_cal import default_calibration_path, load_calibration
 
-# What holds today, pooled over the three clips (see the README's table). The issue's aim is
-# precision >= 0.95 and mean IoU >= 0.75: the boxes' fit is not there yet (#15 stays open).
+# The issue's aim, pooled over the three clips (see the README's table).
 PRECISION = 0.95
 RECALL_DROP = 0.05
-MEAN_IOU = 0.70
+MEAN_IOU = 0.75
 LANE_WITHIN = 0.99
 DISTANCE_DRIFT = 0.05  # median distance of the same vehicles, re-framed over as it is
 
@@ -85,20 +84,20 @@ def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
 
 @pytest.mark.slow
 def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
-    """The labelled clips re-framed (horizon 10 % up and down, 4:3, black side bars) and run
-    without calibration, as footage of an unknown camera: pooled over the three clips, the
-    vehicles, their distances and the lane stay close to the clips as they are."""
+    """The labelled clips re-framed (horizon 10 % up and down, a narrower view, 4:3, black side
+    bars, 960x540, 1920x1080) and run without calibration, as footage of an unknown camera:
+    pooled over the three clips, the vehicles, their distances and the lane stay close to the
+    clips as they are."""
     clips = [
         (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
         for c in ("test_video", "project_cut_1", "project_cut_2")
     ]
-    framings = {f.name: f for f in standard_framings((1280, 720))}
-    chosen = [framings[n] for n in ("as is", "horizon up", "horizon down", "4:3 crop", "side bars")]
-    table = framing_table(clips, load_calibration(default_calibration_path()), chosen)
+    table = framing_table(clips, load_calibration(default_calibration_path()))
     plain = table.pop("as is")
     for name, row in table.items():
         # The same lens cropped or padded: each vehicle is as far as in the clip as it is.
-        assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
+        if name in ("horizon up", "horizon down", "4:3 crop", "side bars"):
+            assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
         assert row["precision"] >= PRECISION, (name, row)
         assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
         assert row["mean_iou"] >= MEAN_IOU, (name, row)

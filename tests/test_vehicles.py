@@ -21,6 +21,7 @@ from vehicles.detector import VehicleDetector, extend_left
 from vehicles.features import patch_features
 from vehicles.heatmap import Heatmap
 from vehicles.model import VehicleModel, default_model_path, load_model
+from vehicles.refine import snap_bottoms
 from vehicles.search import LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
@@ -193,6 +194,22 @@ def test_region_boxes_reach_further_left_but_not_past_the_live_picture() -> None
     # the third, at its right side, keeps its edge (a side region's width is measured otherwise).
     assert out[:, 0].tolist() == [292.0, 5.0, 1180.0]
     assert (out[:, 1:] == boxes[:, 1:]).all() and boxes[0, 0] == 300.0  # input untouched
+
+
+def test_box_bottoms_move_to_where_the_shadow_meets_the_road() -> None:
+    # A grey road, a pale car body over rows 200-260 and its dark shadow and tyres to row 272.
+    frame = np.full((400, 600, 3), 120, np.uint8)
+    frame[200:260, 250:350] = 200
+    frame[260:272, 245:355] = 30
+    live = (0, 0, 600, 400)
+    heat = np.array([[250.0, 195.0, 350.0, 290.0], [250.0, 195.0, 350.0, 262.0]])
+    snapped = snap_bottoms(frame, heat, live)
+    # Both bottoms (18 px too low, 10 px too high) land on the shadow's lower edge.
+    assert np.abs(snapped[:, 3] - 272).max() <= 1
+    assert (snapped[:, :3] == heat[:, :3]).all()
+    # On an even road (a dark night) nothing brightens: the heat's bottom stays.
+    night = np.full((400, 600, 3), 25, np.uint8)
+    assert (snap_bottoms(night, heat, live) == heat).all()
 
 
 def test_track_ids_stay_constant_on_a_moving_box() -> None:

@@ -81,6 +81,11 @@ class DetectorConfig:
     # (left edges came out a median 8-13 % of the width inside the labelled ones on the shared
     # clips, every re-framing of them and challenge clip A; right edges 1-4 %).
     left_extension: float = 0.08
+    # A box's bottom moves to where the picture brightens most going down (shadow and tyres give
+    # way to road), searched this share of its height above and below it (None: heat alone), if
+    # the rise is at least `bottom_min_rise` grey levels (see vehicles/refine.py).
+    bottom_reach: tuple[float, float] | None = (0.3, 0.3)
+    bottom_min_rise: float = 8.0
     min_box: float = 0.03  # smallest box side reported / frame height
     # Video frames alternate between two halves of the bands (the heat history spans both).
     interleave: bool = True

@@ -11,6 +11,7 @@ from vehicles.config import DetectorConfig
 from vehicles.detections import Detections
 from vehicles.heatmap import Heatmap
 from vehicles.model import ModelError, VehicleModel
+from vehicles.refine import snap_bottoms
 from vehicles.search import BandHits, LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
@@ -170,6 +171,10 @@ class VehicleDetector:
         frame_heat = self.heatmap.add((lx1 - lx0, ly1 - ly0), heated, weight)
         region_boxes, peaks = self.heatmap.regions()
         region_boxes = extend_left(region_boxes + offset, cfg.left_extension, lx0, lx1)
+        if cfg.bottom_reach is not None:
+            region_boxes = snap_bottoms(
+                frame, region_boxes, view.live, cfg.bottom_reach, cfg.bottom_min_rise
+            )
         big = (
             np.minimum(
                 region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
