@@ -29,8 +29,8 @@ def test_challenge_clip_the_car_beside_and_no_boxes_on_barrier_or_shadow(
     unchecked = _scores(clip, tmp_path, "--verifier", "none")
     assert checked["recall"] >= 0.7
     assert checked["precision"] >= 0.7 > unchecked["precision"]
-    # Boxes reach the SUV's left side (0.656 before region boxes were extended leftwards).
-    assert checked["mean_iou"] >= 0.67
+    # Boxes reach the SUV's left side and its tyres (0.656 from the heat alone).
+    assert checked["mean_iou"] >= 0.70
 
 
 @pytest.mark.slow
