@@ -274,9 +274,9 @@ class SceneTracker:
     @property
     def placement(self) -> dict[str, Any]:
         """The horizon, vanishing point's column, live box and scale height as the stages place
-        their work by (their `process` keywords): they follow the estimate in steps of more than
-        `settle` of the height, so its wobble neither restarts the lanes' history nor moves the
-        vehicle bands."""
+        their work by (their `process` keywords): they follow the estimate in steps (`settle`,
+        `settle_x`), so its wobble neither restarts the lanes' history nor moves the vehicle
+        bands; the column is None (the live centre) until it is that far off the centre."""
         horizon, live, (x0, y0, x1, y1) = self._placed
         return {
             "horizon_y": horizon,

@@ -17,7 +17,7 @@ from camera_cal import build_undistorter, default_calibration_path, load_calibra
 from tests.helpers import process_clip
 from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
 from vehicles.detections import Detections
-from vehicles.detector import VehicleDetector, extend_left
+from vehicles.detector import VehicleDetector
 from vehicles.features import patch_features
 from vehicles.heatmap import Heatmap
 from vehicles.model import VehicleModel, default_model_path, load_model
@@ -27,8 +27,8 @@ from vehicles.tracker import Tracker
 
 
 def plain_heat(**settings: Any) -> HeatConfig:
-    """Heat settings with every side rule off unless asked for."""
-    return HeatConfig(**{"edge_peak_fraction": None, **settings})
+    """Heat settings with every side rule and box correction off unless asked for."""
+    return HeatConfig(**{"edge_peak_fraction": None, "left_extension": 0.0, **settings})
 
 
 def plain_tracking(**settings: Any) -> TrackConfig:
@@ -185,15 +185,19 @@ def test_heatmap_box_of_a_vehicle_at_the_frame_side_covers_its_inner_part() -> N
     assert iou(found[0], [1168, 420, 1280, 540]) > 0.9
 
 
-def test_region_boxes_reach_further_left_but_not_past_the_live_picture() -> None:
-    boxes = np.array(
-        [[300.0, 400.0, 400.0, 460.0], [10.0, 400.0, 110.0, 460.0], [1180.0, 400.0, 1275.0, 460.0]]
-    )
-    out = extend_left(boxes, 0.08, x_min=5.0, x_max=1275.0)
-    # 8 % of the 100 px width further left; the second box stops at the live picture's left side;
-    # the third, at its right side, keeps its edge (a side region's width is measured otherwise).
-    assert out[:, 0].tolist() == [292.0, 5.0, 1180.0]
-    assert (out[:, 1:] == boxes[:, 1:]).all() and boxes[0, 0] == 300.0  # input untouched
+def test_region_boxes_reach_further_left_but_not_at_the_picture_side() -> None:
+    middle = np.array([[400.0, 420, 528, 540]] * 3)
+    side = np.array([[1216.0, 420, 1344, 540]] * 4 + [[1168.0, 420, 1296, 540]])
+    for windows in (middle, side):
+        plain = _regions_of(windows)
+        extended = _regions_of(windows, left_extension=0.08)
+        assert len(plain) == len(extended) == 1
+        assert (extended[0, 1:] == plain[0, 1:]).all()
+        width = plain[0, 2] - plain[0, 0]
+        # 8 % of the width further left in the middle; a region at the side keeps its width
+        # (the side rule measures it).
+        shift = 0.08 * width if windows is middle else 0.0
+        assert extended[0, 0] == pytest.approx(plain[0, 0] - shift)
 
 
 def test_box_bottoms_move_to_where_the_shadow_meets_the_road() -> None:

@@ -45,6 +45,11 @@ class HeatConfig:
     # (mirrored windows past the side pile heat up there); None: as any other region.
     edge_peak_fraction: float | None = 0.2
     split_valley: float = 0.6  # two peaks split a region when the valley is below this x peak
+    # Any other region's box reaches this share of its width further left (not past the picture):
+    # its heat stops short of the vehicle's left side, whichever side of the picture the vehicle
+    # is on (left edges came out a median 8-13 % of the width inside the labelled ones on the
+    # shared clips, every re-framing of them and challenge clip A; right edges 1-4 %).
+    left_extension: float = 0.08
 
 
 @dataclass(frozen=True)
@@ -76,11 +81,6 @@ class DetectorConfig:
     # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
     # training crops are wider than the car is tall, with road showing below it.
     heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)
-    # A region's box reaches this share of its width further left (within the live picture): its
-    # heat stops short of the vehicle's left side, whichever side of the picture the vehicle is on
-    # (left edges came out a median 8-13 % of the width inside the labelled ones on the shared
-    # clips, every re-framing of them and challenge clip A; right edges 1-4 %).
-    left_extension: float = 0.08
     # A box's bottom moves to where the picture brightens most going down (shadow and tyres give
     # way to road), searched this share of its height above and below it (None: heat alone), if
     # the rise is at least `bottom_min_rise` grey levels (see vehicles/refine.py).

@@ -44,19 +44,6 @@ def footprint(
     return np.asarray(np.tile(boxes[:, :2], 2) + size * np.asarray(part))
 
 
-def extend_left(
-    boxes: NDArray[np.float64], share: float, x_min: float, x_max: float
-) -> NDArray[np.float64]:
-    """The boxes inside (x_min, x_max) with their left edges moved `share` of their width further
-    left, not past `x_min`; a box at either side stays as it is (its width is measured at a lower
-    share of its peak heat already: see `Heatmap.regions`)."""
-    inside = (boxes[:, 0] > x_min) & (boxes[:, 2] < x_max)
-    moved = np.maximum(boxes[:, 0] - share * (boxes[:, 2] - boxes[:, 0]), x_min)
-    out = boxes.copy()
-    out[:, 0] = np.where(inside, moved, boxes[:, 0])
-    return out
-
-
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -170,7 +157,7 @@ class VehicleDetector:
         heated = footprint(boxes[strong], cfg.heat_footprint) - offset
         frame_heat = self.heatmap.add((lx1 - lx0, ly1 - ly0), heated, weight)
         region_boxes, peaks = self.heatmap.regions()
-        region_boxes = extend_left(region_boxes + offset, cfg.left_extension, lx0, lx1)
+        region_boxes = region_boxes + offset
         if cfg.bottom_reach is not None:
             region_boxes = snap_bottoms(
                 frame, region_boxes, view.live, cfg.bottom_reach, cfg.bottom_min_rise
