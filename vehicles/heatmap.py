@@ -150,11 +150,11 @@ class Heatmap:
 
         Recent heat is labelled, split at clear valleys between peaks, and each part is kept when it
         touches the thresholded history; its box covers its recent heat above `peak_fraction` of
-        its peak, tighter than the union of square windows, and reaching `left_extension` of its
-        width further left unless it reaches a side of the picture. A region touching the frame's left or right side takes its
-        horizontal extent at `edge_fraction` of its peak instead: windows reaching past the side
-        see the vehicle and its mirror image, so heat piles up at the side and the vehicle's
-        inner part falls below the usual fraction.
+        its peak, tighter than the union of square windows, and reaches `left_extension` of its
+        width further left unless it reaches a side of the picture. A region touching the frame's
+        left or right side takes its horizontal extent at `edge_fraction` of its peak instead:
+        windows reaching past the side see the vehicle and its mirror image, so heat piles up at
+        the side and the vehicle's inner part falls below the usual fraction.
         """
         cfg = self.config
         persistent = self.combined > cfg.threshold
