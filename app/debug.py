@@ -22,8 +22,9 @@ from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
 
 # Seconds run before the first chosen frame so history is as in a real run: an unknown camera's
-# stages wait for the horizon, and its bonnet is placed within a second.
-WARMUP_S = HORIZON_WAIT_S + 1.0
+# stages wait for the horizon, its bonnet is placed within a second, and burnt-in captions are
+# found after 24 samples of every 5th frame (4-5 s of driving).
+WARMUP_S = HORIZON_WAIT_S + 3.0
 SCALE_COLORS = [(255, 80, 80), (255, 200, 0), (80, 255, 80), (0, 200, 255), (200, 80, 255)]
 
 
@@ -52,7 +53,8 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
 def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     """The scene geometry on the frame: the live box (green; its bottom is labelled when a
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
-    --horizon) and the road's vanishing point on it (a circle, once estimated)."""
+    --horizon), the road's vanishing point on it (a circle, once estimated) and the boxes of
+    burnt-in captions (red)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -63,6 +65,11 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.vanishing_x is not None:
         cv2.circle(picture, (round(scene.vanishing_x), y), 9, color, 2, cv2.LINE_AA)
+    for cx0, cy0, cx1, cy1 in scene.overlays:
+        cv2.rectangle(picture, (cx0, cy0), (cx1 - 1, cy1 - 1), (255, 40, 40), 2)
+        cv2.putText(
+            picture, "caption", (cx0, cy0 - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 40, 40), 1
+        )
     if scene.bonnet_y is not None:
         cv2.putText(
             picture, "bonnet", (x0 + 10, y1 + 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 255, 0), 2

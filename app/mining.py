@@ -38,7 +38,8 @@ def mine_clip(
         tracker.update(frame)
         if index % every:
             continue
-        view = detector.view(info.size, **tracker.placement)
+        placed = tracker.placement
+        view = detector.view(info.size, placed["horizon_y"], placed["live"], placed["scale_height"])
         hits = detector.search(frame, None, view)
         if not hits:
             continue

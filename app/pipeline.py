@@ -237,7 +237,13 @@ class Pipeline:
         current = (
             self.lanes.current_view
             if self.lanes is not None
-            else _scene_warp((undistorted.shape[1], undistorted.shape[0]), **started.placement)
+            else _scene_warp(
+                (undistorted.shape[1], undistorted.shape[0]),
+                started.placement["horizon_y"],
+                started.placement["live"],
+                started.placement["scale_height"],
+                started.placement["vanishing_x"],
+            )
         )
         if (
             self._geometry is not None

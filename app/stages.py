@@ -12,8 +12,9 @@ class FrameStage(Protocol):
     """A stage sees every undistorted RGB frame in order and may keep history between frames.
 
     `process` also takes the scene as plain values (the horizon row, the live box inside black
-    bars, the height its tuned fractions are of, the road's vanishing point's column): the stages
-    do not import the scene module, nor each other."""
+    bars, the height its tuned fractions are of, the road's vanishing point's column, the boxes
+    of burnt-in captions where no road is read): the stages do not import the scene module, nor
+    each other."""
 
     def process(
         self,
@@ -22,6 +23,7 @@ class FrameStage(Protocol):
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
         vanishing_x: float | None = None,
+        overlays: tuple[tuple[int, int, int, int], ...] = (),
     ) -> object:
         """Analyse one frame; history classes update here."""
         ...

@@ -1,15 +1,17 @@
 """Scene geometry from the footage itself: the live part of the picture and the horizon.
 
-A dashcam's picture may carry black bars (a 4:3 sensor in a 16:9 file, a letterbox) and a bonnet
-at its bottom, and its horizon sits wherever the camera's height and pitch put it. All are read off
-the frames: bars are rows and columns that stay black in every frame seen; a bonnet is the band of
-bottom rows that stays still while the road above it streams past; the horizon is the row of the
-vanishing point of the road's straight edges (lane lines, kerbs, barriers), the median over
-recent frames, and the caller's default until there is enough evidence.
+A dashcam's picture may carry black bars (a 4:3 sensor in a 16:9 file, a letterbox), a bonnet
+at its bottom and burnt-in captions, and its horizon sits wherever the camera's height and pitch
+put it. All are read off the frames: bars are rows and columns that stay black in every frame
+seen; a bonnet is the band of bottom rows that stays still while the road above it streams past;
+captions are dense patches of edges that stay in place (`camera_cal.overlay`); the horizon is the
+row of the vanishing point of the road's straight edges (lane lines, kerbs, barriers), the median
+over recent frames, and the caller's default until there is enough evidence.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -17,6 +19,8 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from camera_cal.overlay import OverlayTracker
 
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1 (x1, y1 exclusive)
 MEASURE_WIDTH = 640
@@ -34,6 +38,8 @@ class SceneGeometry:
     # The road's vanishing point's column (a camera turned sideways, or a picture cut off-centre,
     # puts it off the live box's centre); None until measured.
     vanishing_x: float | None = None
+    # Burnt-in captions and logos (and glare fixed on the windscreen): no road is read there.
+    overlays: tuple[Box, ...] = ()
 
 
 def scale_height(live_size: tuple[int, int]) -> float:
@@ -45,6 +51,17 @@ def scale_height(live_size: tuple[int, int]) -> float:
     ratio)."""
     long_side, short_side = max(live_size), min(live_size)
     return float(max(long_side * 9 / 16, short_side))
+
+
+def scale_box(box: Box, factor: float) -> Box:
+    """`box` scaled by `factor`, rounded outwards (it still covers what it covered)."""
+    x0, y0, x1, y1 = box
+    return (
+        math.floor(x0 * factor),
+        math.floor(y0 * factor),
+        math.ceil(x1 * factor),
+        math.ceil(y1 * factor),
+    )
 
 
 def live_box(row_max: NDArray[np.uint8], col_max: NDArray[np.uint8], dark: int = 24) -> Box:
@@ -89,18 +106,23 @@ def bonnet_row(
     return int(rows[found[0]]) if len(found) else None
 
 
-def road_segments(grey: NDArray[np.uint8], live: Box, top: int) -> NDArray[np.float64]:
-    """Straight edge segments (x1, y1, x2, y2) below row `top` inside the live box, slanted
-    20-75 degrees from the horizontal as the road's edges are seen ahead."""
+def road_segments(
+    grey: NDArray[np.uint8], live: Box, top: int, hidden: tuple[Box, ...] = ()
+) -> NDArray[np.float64]:
+    """Straight edge segments (x1, y1, x2, y2) below row `top` inside the live box and outside
+    the `hidden` boxes (captions), slanted 20-75 degrees from the horizontal as the road's edges
+    are seen ahead."""
     x0, y0, x1, y1 = live
     top = max(top, y0)
     if y1 - top < 16 or x1 - x0 < 16:
         return np.empty((0, 4))
     part = cv2.GaussianBlur(grey[top:y1, x0:x1], (5, 5), 0)
     edges = cv2.Canny(part, 60, 150)
-    # Bar edges and the picture's border are no road edges.
+    # Bar edges and the picture's border are no road edges; nor are a caption's letters.
     edges[:, :3] = edges[:, -3:] = 0
     edges[-3:] = 0
+    for hx0, hy0, hx1, hy1 in hidden:
+        edges[max(0, hy0 - top) : max(0, hy1 - top), max(0, hx0 - x0) : max(0, hx1 - x0)] = 0
     h = y1 - y0
     found = cv2.HoughLinesP(
         edges, 1, np.pi / 180, 40, minLineLength=max(h // 12, 12), maxLineGap=max(h // 60, 2)
@@ -141,8 +163,9 @@ def vanishing_point(
 
 class SceneTracker:
     """History for the scene geometry: the brightest value seen per row and column (for the
-    bars), each row's change between frames `motion_every` apart (for a bonnet) and the recent
-    vanishing points (for the horizon).
+    bars), each row's change between frames `motion_every` apart (for a bonnet), the edges of
+    every `overlay_every`-th frame (for captions) and the recent vanishing points (for the
+    horizon).
 
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
     `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
@@ -167,6 +190,7 @@ class SceneTracker:
         motion_window: int = 60,
         bonnet_every: int = 10,
         settle_x: float = 0.03,
+        overlay_every: int = 5,
     ) -> None:
         self.size = size
         self.fixed_scale = fixed_scale
@@ -186,6 +210,12 @@ class SceneTracker:
         self._previous: NDArray[np.int16] | None = None
         self._bonnet: int | None = None
         self._samples = 0
+        # Captions and the horizon are measured on the picture at most MEASURE_WIDTH wide.
+        self._scale = min(1.0, MEASURE_WIDTH / size[0])
+        self._small = (max(1, round(size[0] * self._scale)), max(1, round(size[1] * self._scale)))
+        self.overlay_every = overlay_every
+        self._overlays = OverlayTracker(self._small)
+        self._captions: tuple[Box, ...] = ()  # the overlays found, in the frame's pixels
         self._current = SceneGeometry(
             size, fixed_horizon if fixed_horizon is not None else default_horizon, self._box()
         )
@@ -241,8 +271,15 @@ class SceneTracker:
         # then every few.
         due = self._count % self.every == 0 or len(self._estimates) < self.min_estimates
         live = self._box() if due else self._current.live
-        if self.fixed_horizon is None and due:
-            self._measure(grey, live)
+        sampled = self._count % self.overlay_every == 0
+        small = self._shrink(grey) if sampled or (self.fixed_horizon is None and due) else None
+        if sampled and small is not None:
+            found = self._overlays.update(small)
+            self._captions = tuple(scale_box(box, 1 / self._scale) for box in found)
+        # Those in the live box (the bonnet's edge below it is no caption, and no road is there).
+        overlays = tuple(b for b in self._captions if b[1] < live[3] and b[3] > live[1])
+        if self.fixed_horizon is None and due and small is not None:
+            self._measure(small, live, overlays)
         self._count += 1
         vanishing_x = None
         if self.fixed_horizon is not None:
@@ -254,7 +291,9 @@ class SceneTracker:
         else:
             horizon, estimated = self.default_horizon, False
         bonnet = self._bonnet if live[3] == self._bonnet else None
-        self._current = SceneGeometry(self.size, horizon, live, estimated, bonnet, vanishing_x)
+        self._current = SceneGeometry(
+            self.size, horizon, live, estimated, bonnet, vanishing_x, overlays
+        )
         tolerance = self.settle * self.size[1]
         placed_horizon, placed_live, _ = self._placed
         moved = abs(horizon - placed_horizon) > tolerance or any(
@@ -282,23 +321,32 @@ class SceneTracker:
             "horizon_y": horizon,
             "vanishing_x": self._placed_x,
             "live": live,
+            "overlays": self._current.overlays,
             # The scale is the picture's inside the bars: a bonnet hides road, not lens.
             "scale_height": scale_height((x1 - x0, y1 - y0))
             if self.fixed_scale is None
             else self.fixed_scale,
         }
 
-    def _measure(self, grey: NDArray[np.uint8], live: Box) -> None:
-        """Add this frame's vanishing point, when the road's edges give one (measured at most
-        640 pixels wide: as exact, and four times cheaper on HD)."""
-        scale = min(1.0, MEASURE_WIDTH / grey.shape[1])
-        if scale < 1.0:
-            grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    def _shrink(self, grey: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """The grey picture at most MEASURE_WIDTH wide (as exact for edges, four times cheaper
+        on HD)."""
+        if self._scale >= 1.0:
+            return grey
+        return np.asarray(
+            cv2.resize(grey, None, fx=self._scale, fy=self._scale, interpolation=cv2.INTER_AREA)
+        )
+
+    def _measure(self, small: NDArray[np.uint8], live: Box, overlays: tuple[Box, ...]) -> None:
+        """Add this frame's vanishing point, when the road's edges outside the `overlays` give
+        one (`small`: the picture shrunk by `_shrink`)."""
+        scale = self._scale
         x0, y0, x1, y1 = (round(v * scale) for v in live)
+        hidden = tuple(scale_box(box, scale) for box in overlays)
         h = y1 - y0
         # Edges from a little below the current horizon down: the road, not the sky.
         top = round(max(self._current.horizon_y * scale, y0 + 0.2 * h) + 0.05 * h)
-        segments = road_segments(grey, (x0, y0, x1, y1), top)
+        segments = road_segments(small, (x0, y0, x1, y1), top, hidden)
         point = vanishing_point(segments, tolerance=0.02 * h)
         if point is None:
             return

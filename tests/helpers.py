@@ -1,4 +1,5 @@
-"""Helpers for tests that run the roadview command line as a user would."""
+"""Helpers for tests: run the roadview command line as a user would, read its records, and make
+synthetic footage."""
 
 from __future__ import annotations
 
@@ -7,6 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
 
 from app.sources import VideoInfo, probe_video, read_frames
 
@@ -49,3 +54,23 @@ def process_clip(video: Path, folder: Path, *options: str) -> list[dict[str, Any
     result = run_cli("process", video, "-o", folder / "o.mp4", "--json", record, *options)
     assert result.returncode == 0, result.stderr
     return read_record(record)
+
+
+def moving_road(
+    size: tuple[int, int], frames: int, bonnet: int | None = None
+) -> list[NDArray[np.uint8]]:
+    """Frames of a textured road streaming down the picture (as under a moving camera), with a
+    still, smooth bonnet from row `bonnet` down when given."""
+    w, h = size
+    rng = np.random.default_rng(7)
+    texture = cv2.resize(
+        rng.integers(40, 200, (h // 4 + frames * 2, w // 4), np.uint8), None, fx=4, fy=4
+    )
+    out = []
+    for t in range(frames):
+        grey = texture[(frames - t) * 8 : (frames - t) * 8 + h]
+        frame = np.repeat(grey[:, :, None], 3, axis=2).copy()
+        if bonnet is not None:
+            frame[bonnet:] = (200, 200, 205)
+        out.append(frame)
+    return out

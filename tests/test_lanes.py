@@ -179,3 +179,6 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     )
     found = sum(r["lane"] is not None for r in rows)
     assert found >= 0.8 * len(rows)
+    # Its watermark is in the record from its sixth second on, in the lower half.
+    assert all(r["overlays"] for r in rows if r["time_s"] >= 6.0)
+    assert all(y0 > rows[0]["size"][1] / 2 for r in rows for _, y0, _, _ in r["overlays"])

@@ -18,7 +18,7 @@ from camera_cal.scene import (
     scale_height,
     vanishing_point,
 )
-from tests.helpers import assert_one_line_error, process_clip, run_cli
+from tests.helpers import assert_one_line_error, moving_road, process_clip, run_cli
 
 Frame = np.ndarray
 
@@ -179,24 +179,6 @@ def test_an_unknown_camera_waits_for_its_horizon(wild_dir: Path, tmp_path: Path)
     assert sum(1 for r in placed if r["lane"]) >= 0.9 * len(placed)
 
 
-def _moving_road(size: tuple[int, int], frames: int, bonnet: int | None) -> list[Frame]:
-    """Frames of a textured road streaming down the picture (as under a moving camera), with a
-    still, smooth bonnet from row `bonnet` down when given."""
-    w, h = size
-    rng = np.random.default_rng(7)
-    texture = cv2.resize(
-        rng.integers(40, 200, (h // 4 + frames * 2, w // 4), np.uint8), None, fx=4, fy=4
-    )
-    out = []
-    for t in range(frames):
-        grey = texture[(frames - t) * 8 : (frames - t) * 8 + h]
-        frame = np.repeat(grey[:, :, None], 3, axis=2).copy()
-        if bonnet is not None:
-            frame[bonnet:] = (200, 200, 205)
-        out.append(frame)
-    return out
-
-
 def test_a_bonnet_ends_the_live_picture_and_a_moving_road_does_not() -> None:
     size = (320, 240)
     motion = np.r_[np.full(200, 8.0), np.full(40, 0.5)]
@@ -206,7 +188,7 @@ def test_a_bonnet_ends_the_live_picture_and_a_moving_road_does_not() -> None:
     assert bonnet_row(np.r_[np.full(200, 8.0), np.linspace(8.0, 3.0, 40)]) is None  # smooth asphalt
     for bonnet in (190, None):
         tracker = SceneTracker(size, default_horizon=120.0)
-        for frame in _moving_road(size, 90, bonnet):
+        for frame in moving_road(size, 90, bonnet):
             scene = tracker.update(frame)
         if bonnet is None:
             assert scene.bonnet_y is None and scene.live[3] == 240

@@ -35,6 +35,7 @@ class Counter:
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
         vanishing_x: float | None = None,
+        overlays: tuple[tuple[int, int, int, int], ...] = (),
     ) -> Seen:
         self.count += 1
         if self.count == self.fail_at:

@@ -78,6 +78,9 @@ class DetectorConfig:
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
     # fooled the detector, while the detector's windows still place the boxes.
     min_verified: float = 0.3
+    # A window does not heat where burnt-in captions (a timestamp, a watermark) cover at least
+    # this share of it: their letters' edges are no car's.
+    max_overlay: float = 0.25
     # The part of each hit's window that is heated, (x0, y0, x1, y1) as fractions of its size:
     # training crops are wider than the car is tall, with road showing below it.
     heat_footprint: tuple[float, float, float, float] = (0.0, 0.1, 1.0, 0.85)

@@ -44,6 +44,23 @@ def footprint(
     return np.asarray(np.tile(boxes[:, :2], 2) + size * np.asarray(part))
 
 
+def covered_share(
+    boxes: NDArray[np.float64], hidden: tuple[tuple[int, int, int, int], ...]
+) -> NDArray[np.float64]:
+    """The share of each box (x0, y0, x1, y1) that the `hidden` boxes cover (they are taken
+    not to overlap each other)."""
+    if not hidden or len(boxes) == 0:
+        return np.zeros(len(boxes))
+    other = np.asarray(hidden, np.float64)
+    x0 = np.maximum(boxes[:, None, 0], other[None, :, 0])
+    y0 = np.maximum(boxes[:, None, 1], other[None, :, 1])
+    x1 = np.minimum(boxes[:, None, 2], other[None, :, 2])
+    y1 = np.minimum(boxes[:, None, 3], other[None, :, 3])
+    inside = (np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)).sum(axis=1)
+    area = np.maximum((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]), 1e-9)
+    return np.asarray(np.minimum(inside / area, 1.0))
+
+
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -125,10 +142,11 @@ class VehicleDetector:
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
         vanishing_x: float | None = None,
+        overlays: tuple[tuple[int, int, int, int], ...] = (),
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given;
-        `vanishing_x` does not move them)."""
+        `vanishing_x` does not move them; windows over burnt-in `overlays` do not heat)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height)
@@ -148,6 +166,8 @@ class VehicleDetector:
             sure = self.verifier.probability(verified) >= cfg.min_verified
             vetoed = boxes[strong & ~sure]
             strong &= sure
+        if overlays:
+            strong &= covered_share(boxes, overlays) < cfg.max_overlay
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
         weight = (2.0 if parity is not None else 1.0) * proba[strong]
         # Heat is kept over the live picture alone: windows reaching past its sides pile their
