@@ -20,6 +20,9 @@ class LaneConfig:
     # Bird's-eye image: size as fractions of the frame, lane lines mapped to these columns.
     warp_width: float = 0.4
     warp_height: float = 0.3
+    # ... of a frame at most this tall: a larger picture gives the view no finer paint in metres
+    # worth its cost (2.3 times the pixels at 1080p), so it is sized as for 720 rows.
+    max_warp_frame_height: float = 720.0
     dst_left_x: float = 0.3
     dst_right_x: float = 0.7
     # World scale: a US lane is 3.7 m wide; dashes are 3 m long (sets metres per warped row).

@@ -106,7 +106,8 @@ def birdseye_for(
     src = np.array([centre, horizon]) + scale * (reference - apex)
     if vanishing_x is not None and bottom > horizon:
         src[:, 0] += (vanishing_x - centre) * (bottom - src[:, 1]) / (bottom - horizon)
-    bw, bh = round(ref_w * config.warp_width), round(ref_h * config.warp_height)
+    sized = min(ref_h, config.max_warp_frame_height)
+    bw, bh = round(sized * 16 / 9 * config.warp_width), round(sized * config.warp_height)
     dst = np.array(
         [
             [config.dst_left_x * bw, 0],

@@ -182,3 +182,16 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # Its watermark is in the record from its sixth second on, in the lower half.
     assert all(r["overlays"] for r in rows if r["time_s"] >= 6.0)
     assert all(y0 > rows[0]["size"][1] / 2 for r in rows for _, y0, _, _ in r["overlays"])
+
+
+def test_a_larger_frame_keeps_the_720_row_birdseye_view() -> None:
+    """Above 720 rows the bird's-eye image keeps its 720-row size and covers the same road: a
+    point of a 720p frame and the same point of the 1080p frame land on the same view pixel;
+    a smaller frame gets a smaller view."""
+    small, hd, full = (
+        birdseye_for(size, LaneConfig()) for size in ((640, 360), (1280, 720), (1920, 1080))
+    )
+    assert full.size == hd.size and small.size == (256, 108)
+    points = np.array([[500.0, 600.0], [700.0, 480.0], [900.0, 650.0]])
+    np.testing.assert_allclose(full.to_birdseye(points * 1.5), hd.to_birdseye(points), atol=1e-3)
+    assert full.xm_per_px == pytest.approx(hd.xm_per_px)
