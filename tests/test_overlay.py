@@ -41,10 +41,15 @@ def _caption(frame: np.ndarray, text: str, origin: tuple[int, int]) -> Box:
 
 
 def test_a_caption_on_a_streaming_road_is_found_and_nothing_else() -> None:
+    """A dashcam's clock, its seconds ticking (a new second every 25 frames), over a road
+    streaming past: found whole; the road alone has none."""
     size = (320, 240)
     frames = moving_road(size, 160)
     captioned = [f.copy() for f in frames]
-    truth = [_caption(f, "2026/11/23 19:05:42", (150, 228)) for f in captioned].pop()
+    drawn = [
+        _caption(f, f"2026/11/23 19:05:{i // 25:02d}", (150, 228)) for i, f in enumerate(captioned)
+    ]
+    truth = (min(b[0] for b in drawn), drawn[0][1], max(b[2] for b in drawn), drawn[0][3])
     for clip, expected in ((captioned, True), (frames, False)):
         tracker = SceneTracker(size, default_horizon=120.0)
         seen = [tracker.update(f).overlays for f in clip]
