@@ -13,8 +13,7 @@ class FrameStage(Protocol):
 
     `process` also takes the scene as plain values (the horizon row, the live box inside black
     bars, the height its tuned fractions are of, the road's vanishing point's column, the boxes
-    of burnt-in captions where no road is read): the stages do not import the scene module, nor
-    each other."""
+    of burnt-in captions): the stages do not import the scene module, nor each other."""
 
     def process(
         self,

@@ -38,7 +38,7 @@ class SceneGeometry:
     # The road's vanishing point's column (a camera turned sideways, or a picture cut off-centre,
     # puts it off the live box's centre); None until measured.
     vanishing_x: float | None = None
-    # Burnt-in captions and logos (and glare fixed on the windscreen): no road is read there.
+    # Burnt-in captions and logos (and glare fixed on the windscreen) inside the live box.
     overlays: tuple[Box, ...] = ()
 
 
