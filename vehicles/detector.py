@@ -100,11 +100,10 @@ class VehicleDetector:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
-        vanishing_x: float | None = None,
     ) -> View:
         """Where to search frames of `size`: the given horizon, live box and scale, or the
         defaults (the whole frame, its height). The bands span the live box's width, wherever
-        the road's vanishing point (`vanishing_x`) is: it does not move them."""
+        the road's vanishing point is: it does not move them."""
         default = View.default(size, self.config.reference_horizon)
         box = default.live if live is None else live
         return View(
