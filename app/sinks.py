@@ -73,7 +73,9 @@ class Container:
     audio: str
 
 
-_X264 = ("-c:v", "libx264", "-preset", "ultrafast", "-crf", "20", "-pix_fmt", "yuv420p")
+# x264's fastest preset, as roadview writes its videos (it turns the deblocking filter off).
+FAST_PRESET = "ultrafast"
+_X264 = ("-c:v", "libx264", "-preset", FAST_PRESET, "-crf", "20", "-pix_fmt", "yuv420p")
 # VP9 in real-time mode: about as fast as the processing; quality set by CRF alone.
 _VP9 = (
     "-c:v",
@@ -136,7 +138,7 @@ class VideoWriter:
         size: tuple[int, int],
         fps: float,
         audio: AudioSpan | None = None,
-        preset: str = "ultrafast",
+        preset: str = FAST_PRESET,
     ) -> None:
         self.size = size
         container = container_for(path)
@@ -277,7 +279,7 @@ class VideoSink(_AtomicSink):
         size: tuple[int, int],
         fps: float,
         audio: AudioSpan | None = None,
-        preset: str = "ultrafast",
+        preset: str = FAST_PRESET,
     ) -> None:
         super().__init__(path)
         container_for(self.path)  # an impossible container is refused before any work

@@ -21,7 +21,7 @@ from app.assembly import build_stages
 from app.pipeline import Pipeline
 from app.reframe import Framing, framing_table, write_reframed
 from app.runtime import tune_process
-from app.sinks import VideoWriter
+from app.sinks import FAST_PRESET, VideoWriter
 from app.sources import probe_video, read_frames
 from camera_cal import default_calibration_path, load_calibration
 from vehicles.config import DetectorConfig
@@ -331,7 +331,7 @@ def main() -> None:
     report["framings"] = framing_table(clips, calibration)
     # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to
     # keep in view how blocky compression still fools the classifier.
-    blocky = framing_table(clips, calibration, [Framing("as is")], preset="ultrafast")
+    blocky = framing_table(clips, calibration, [Framing("as is")], preset=FAST_PRESET)
     report["framings"]["as is, blocky re-encode"] = blocky["as is"]
     print("quality on re-framed clips (pooled over the three, IoU 0.5, --calibration none):")
     for name, row in report["framings"].items():
