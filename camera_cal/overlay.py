@@ -1,11 +1,12 @@
-"""Burnt-in overlays: timestamps, logos and watermarks drawn onto the picture, and glare fixed
-on the windscreen.
+"""What stays fixed in the picture while the road streams past: burnt-in timestamps, logos and
+watermarks, glare fixed on the windscreen, and parts of one's own car (a mirror, a pillar).
 
-They are read off the frames as the edges that stay on the same pixel while the road streams
-past: an overlay's letters keep their edges in place in every frame, the road's edges move (a
-lane line beside the camera wobbles by a pixel or two; a bonnet's edge is a long thin line, not
-a dense patch). Their boxes are kept out of the stages' work: no lane paint is read and no
-window is heated where the picture shows a caption rather than the road.
+Captions are read off the frames as the edges that stay on the same pixel: an overlay's letters
+keep their edges in place in every frame, the road's edges move (a lane line beside the camera
+wobbles by a pixel or two; a bonnet's edge is a long thin line, not a dense patch). A part of the
+car is a still patch reaching in from the picture's side and outlined by such steady
+edges (a smooth road is still too, but its outline, the lane lines, moves). Their boxes are kept
+out of the stages' work: no window is heated where the picture shows them rather than the road.
 """
 
 from __future__ import annotations
@@ -68,9 +69,62 @@ def overlay_boxes(
     )
 
 
+def fixed_part_boxes(
+    change: NDArray[np.float64],
+    persistence: NDArray[np.float64],
+    top: int = 0,
+    still_ratio: float = 0.2,
+    min_area: float = 0.005,
+    min_outline: float = 0.15,
+    strip: float = 0.05,
+) -> tuple[Box, ...]:
+    """Boxes over the parts of one's own car in the picture (a mirror, a pillar, the dashboard)
+    from `change`, each pixel's mean change between samples, and `persistence`, how often it was
+    an edge (0-1): patches below row `top` that change less than `still_ratio` of the typical
+    pixel there, reach the picture's left or right side (a bonnet is found on its own), cover
+    `min_area` of it, and whose outline lies along steady edges (persistence >= 0.8) for
+    `min_outline` of its length (a smooth road's patch between moving lane lines has about
+    none). Each patch is given as a stack of boxes `strip` of the height tall, so a slanted
+    pillar does not hide the road beside it."""
+    h, w = change.shape
+    top = min(max(0, top), h - 1)
+    reference = float(np.median(change[top:]))
+    if reference <= 0:
+        return ()
+    still = np.asarray(change < still_ratio * reference, np.uint8)
+    still[:top] = 0
+    still = cv2.morphologyEx(still, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(still, connectivity=8)
+    steady = cv2.dilate(np.asarray(persistence >= 0.8, np.uint8), np.ones((5, 5), np.uint8)) > 0
+    ring_kernel = np.ones((3, 3), np.uint8)
+    tall = max(1, round(strip * h))
+    boxes: list[Box] = []
+    for i in range(1, count):
+        x, y, bw, bh, area = (int(v) for v in stats[i])
+        if area < min_area * h * w or not (x == 0 or x + bw == w):
+            continue
+        whole = np.asarray(labels == i, np.uint8)
+        # Its outline: the pixels around it, but above `top` (where it was cut off, not seen).
+        ring = (cv2.dilate(whole, ring_kernel) > 0) & (whole == 0)
+        ring[:top] = False
+        outline = int(ring.sum())
+        if not outline or (ring & steady).sum() < min_outline * outline:
+            continue
+        part = whole[y : y + bh, x : x + bw]
+        rows = np.flatnonzero(part.any(axis=1))
+        for start in range(int(rows[0]), int(rows[-1]) + 1, tall):
+            cols = np.flatnonzero(part[start : start + tall].any(axis=0))
+            if len(cols):
+                boxes.append(
+                    (x + int(cols[0]), y + start, x + int(cols[-1]) + 1, y + min(bh, start + tall))
+                )
+    return tuple(boxes)
+
+
 class OverlayTracker:
-    """History for the overlays: how often each pixel was an edge, over frames sampled while
-    the picture changes (a car standing still would keep every edge in place).
+    """History for the overlays: how often each pixel was an edge, and how much it changed from
+    one sample to the next, over frames sampled while the picture changes (a car standing still
+    would keep every edge and pixel in place).
 
     Boxes are found once `min_samples` samples are in (a few seconds of driving), and again
     each `every` samples after; `still` is the share of a sample's edges that were edges in the
@@ -90,18 +144,26 @@ class OverlayTracker:
         self.still = still
         self._counts = np.zeros((size[1], size[0]), np.uint16)
         self._previous: NDArray[np.bool_] | None = None
+        self._change = np.zeros((size[1], size[0]), np.float32)
+        self._last: NDArray[np.uint8] | None = None  # the last sample taken in
         self.samples = 0
         self.boxes: tuple[Box, ...] = ()
 
-    def update(self, grey: NDArray[np.uint8]) -> tuple[Box, ...]:
-        """Take in one sample (a grey picture of `size`); the overlays' boxes as of it."""
+    def update(self, grey: NDArray[np.uint8], top: int = 0) -> tuple[Box, ...]:
+        """Take in one sample (a grey picture of `size`); the overlays' boxes as of it (parts of
+        the car are looked for below row `top`, the horizon: the sky is still too)."""
         edges = edge_map(grey)
         previous, self._previous = self._previous, edges
         if previous is not None and (edges & previous).sum() > self.still * max(1, edges.sum()):
             return self.boxes
         if self.samples < np.iinfo(np.uint16).max:
             self._counts += edges
+            if self._last is not None:
+                self._change += cv2.absdiff(grey, self._last)
+            self._last = grey
             self.samples += 1
         if self.samples >= self.min_samples and (self.samples - self.min_samples) % self.every == 0:
-            self.boxes = overlay_boxes(self._counts / self.samples)
+            self.boxes = overlay_boxes(self._counts / self.samples) + fixed_part_boxes(
+                self._change / (self.samples - 1), self._counts / self.samples, top
+            )
         return self.boxes

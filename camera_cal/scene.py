@@ -4,9 +4,10 @@ A dashcam's picture may carry black bars (a 4:3 sensor in a 16:9 file, a letterb
 at its bottom and burnt-in captions, and its horizon sits wherever the camera's height and pitch
 put it. All are read off the frames: bars are rows and columns that stay black in every frame
 seen; a bonnet is the band of bottom rows that stays still while the road above it streams past;
-captions are dense patches of edges that stay in place (`camera_cal.overlay`); the horizon is the
-row of the vanishing point of the road's straight edges (lane lines, kerbs, barriers), the median
-over recent frames, and the caller's default until there is enough evidence.
+captions are dense patches of edges that stay in place, and a mirror or pillar a still patch
+they outline (`camera_cal.overlay`); the horizon is the row of the vanishing point of the road's
+straight edges (lane lines, kerbs, barriers), the median over recent frames, and the caller's
+default until there is enough evidence.
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ class SceneGeometry:
     # The road's vanishing point's column (a camera turned sideways, or a picture cut off-centre,
     # puts it off the live box's centre); None until measured.
     vanishing_x: float | None = None
-    # Burnt-in captions and logos (and glare fixed on the windscreen) inside the live box.
+    # Burnt-in captions and logos, glare fixed on the windscreen and parts of one's own car (a
+    # mirror, a pillar) inside the live box.
     overlays: tuple[Box, ...] = ()
 
 
@@ -274,7 +276,7 @@ class SceneTracker:
         sampled = self._count % self.overlay_every == 0
         small = self._shrink(grey) if sampled or (self.fixed_horizon is None and due) else None
         if sampled and small is not None:
-            found = self._overlays.update(small)
+            found = self._overlays.update(small, round(self._current.horizon_y * self._scale))
             self._captions = tuple(scale_box(box, 1 / self._scale) for box in found)
         # Those in the live box (the bonnet's edge below it is no caption, and no road is there).
         overlays = tuple(b for b in self._captions if b[1] < live[3] and b[3] > live[1])

@@ -1,5 +1,5 @@
-"""Burnt-in captions (timestamps, logos, watermarks): found where they are, nowhere else, and
-kept out of the vehicle search and the horizon."""
+"""Burnt-in captions (timestamps, logos, watermarks) and parts of one's own car in the picture:
+found where they are, nowhere else, and kept out of the vehicle search and the horizon."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from app.sources import probe_video, read_frames
-from camera_cal.overlay import OverlayTracker, overlay_boxes
+from camera_cal.overlay import OverlayTracker, fixed_part_boxes, overlay_boxes
 from camera_cal.scene import SceneTracker
-from tests.helpers import moving_road, run_cli
+from tests.helpers import moving_road, process_clip, run_cli
 from vehicles.config import DetectorConfig
 from vehicles.detector import VehicleDetector, covered_share
 from vehicles.model import default_model_path, load_model
@@ -80,6 +80,58 @@ def test_a_standing_camera_does_not_make_the_scene_a_caption() -> None:
     assert overlay_boxes(counted) != ()  # what the skipped samples would have made of it
 
 
+def _wedge(size: tuple[int, int], tip: tuple[int, int], top: int, bottom: int) -> np.ndarray:
+    """A mask of a wedge reaching in from the picture's right side to `tip` (a mirror's shape),
+    between rows `top` and `bottom` at the side."""
+    w, h = size
+    mask = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(mask, [np.array([tip, (w - 1, top), (w - 1, bottom)], np.int32)], 1)
+    return mask > 0
+
+
+def test_a_still_mirror_is_found_and_a_smooth_road_is_not() -> None:
+    """A dark mirror reaching in from the side stays still and keeps its outline while the road
+    streams past: its boxes cover it, a stack that hugs its slant. A smooth patch whose outline
+    moves (a plain lane between lane lines that sway) is still inside too, and is not found."""
+    size = (320, 240)
+    mirror = _wedge(size, (230, 175), 140, 205)
+    frames = moving_road(size, 160)
+    with_mirror = [f.copy() for f in frames]
+    for f in with_mirror:
+        f[mirror] = (25, 22, 30)
+    swaying = [f.copy() for f in frames]
+    for t, f in enumerate(swaying):
+        shift = round(8 * np.sin(t * 0.9))  # the patch's outline sways a few pixels
+        f[_wedge(size, (230 + shift, 175), 140 + shift, 205 - shift)] = (25, 22, 30)
+    for clip, expected in ((with_mirror, True), (swaying, False), (frames, False)):
+        # The horizon fixed: the synthetic road has no lines to place it (the wedge's would).
+        tracker = SceneTracker(size, default_horizon=120.0, fixed_horizon=120.0)
+        boxes = [tracker.update(f).overlays for f in clip][-1]
+        if not expected:
+            assert boxes == ()
+            continue
+        covered = np.zeros(mirror.shape, bool)
+        for x0, y0, x1, y1 in boxes:
+            covered[y0:y1, x0:x1] = True
+        assert (covered & mirror).sum() >= 0.9 * mirror.sum()
+        # The stack hides little road beside the slanted mirror (its bounding box would hide
+        # as much road as mirror).
+        assert (covered & ~mirror).sum() <= 0.4 * mirror.sum()
+
+
+def test_a_fixed_part_needs_a_steady_outline() -> None:
+    """The rule on its own: the same still patch at the side is a part of the car with steady
+    edges around it, and road without them."""
+    change = np.full((100, 200), 6.0)
+    change[40:70, 160:] = 0.2
+    steady = np.zeros((100, 200))
+    assert fixed_part_boxes(change, steady, top=30) == ()
+    steady[39, 158:] = steady[70, 158:] = steady[39:71, 159] = 1.0
+    boxes = fixed_part_boxes(change, steady, top=30)
+    assert boxes and min(b[0] for b in boxes) == 160 and max(b[3] for b in boxes) == 70
+    assert fixed_part_boxes(change, steady, top=75) == ()  # above the horizon: sky, not car
+
+
 def test_covered_share_of_windows() -> None:
     windows = np.array([[0.0, 0, 10, 10], [20, 20, 30, 30], [5, 0, 15, 10]])
     share = covered_share(windows, ((0, 0, 10, 5), (25, 20, 40, 40)))
@@ -135,6 +187,48 @@ def test_the_captions_of_wild_clips(wild_dir: Path, clip: str, truth: Box | None
         for s in seen[first:]
         for b in s
     )
+
+
+def test_the_mirror_in_a_wild_clip_is_found(wild_dir: Path) -> None:
+    """The LA clip's dashcam sees a dark mirror in its right corner, where the vehicle model
+    boxed it in every frame (outlined by eye on frame 130, 854x480): found within 6 s, covered,
+    and no box anywhere else (the smooth road, the bonnet's reflections, the sky)."""
+    video = wild_dir / "la_freeway_minidashcam_2.mp4"
+    info = probe_video(video)
+    mirror = np.zeros((info.size[1], info.size[0]), np.uint8)
+    cv2.fillPoly(mirror, [np.array([(692, 325), (853, 238), (853, 357), (730, 356)], np.int32)], 1)
+    tracker = SceneTracker(info.size, default_horizon=0.55 * info.size[1])
+    # Its first 12 s, before the clip cuts to another camera.
+    seen = [tracker.update(frame).overlays for frame in read_frames(video, info, 0, 360)]
+    first = next(i for i, s in enumerate(seen) if s)
+    assert first <= 6 * info.fps
+    # Its dark lower part first (65 %), the whole of it as more samples come in; for a frame
+    # before the bonnet is found (4 s), a box on that too.
+    for boxes in seen[round(7 * info.fps) :]:
+        covered = np.zeros(mirror.shape, bool)
+        for x0, y0, x1, y1 in boxes:
+            covered[y0:y1, x0:x1] = True
+        assert (covered & (mirror > 0)).sum() >= 0.9 * mirror.sum()
+        assert all(b[0] >= 680 and b[1] >= 230 and b[3] <= 365 for b in boxes)
+
+
+@pytest.mark.slow
+def test_no_vehicle_is_boxed_on_the_mirror(wild_dir: Path, tmp_path: Path) -> None:
+    """The LA clip's mirror was boxed as a vehicle in every frame; once found (6 s), it is not
+    (the box of a car there is at most half on it)."""
+    video = wild_dir / "la_freeway_minidashcam_2.mp4"
+    rows = process_clip(video, tmp_path, "--no-lanes", "--calibration", "none", "--end", "12")
+    corner = (692, 238, 854, 357)  # the mirror's box (outlined above)
+
+    def on_mirror(box: list[float]) -> bool:
+        x0, y0, x1, y1 = box
+        inside = max(0.0, min(x1, corner[2]) - max(x0, corner[0])) * max(
+            0.0, min(y1, corner[3]) - max(y0, corner[1])
+        )
+        return inside >= 0.5 * (x1 - x0) * (y1 - y0)
+
+    later = rows[6 * 30 :]
+    assert sum(on_mirror(v["box"]) for r in later for v in r["vehicles"]) <= 0.02 * len(later)
 
 
 def test_the_debug_mode_draws_the_captions(wild_dir: Path, tmp_path: Path) -> None:

@@ -145,7 +145,8 @@ class VehicleDetector:
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given;
-        `vanishing_x` does not move them; windows over burnt-in `overlays` do not heat)."""
+        `vanishing_x` does not move them; windows over `overlays`, captions or parts of the
+        car, do not heat)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height)
