@@ -73,6 +73,7 @@ def fixed_part_boxes(
     change: NDArray[np.float64],
     persistence: NDArray[np.float64],
     top: int = 0,
+    inside: Box | None = None,
     still_ratio: float = 0.2,
     min_area: float = 0.005,
     min_outline: float = 0.15,
@@ -85,9 +86,14 @@ def fixed_part_boxes(
     `min_area` of it, and whose outline lies along steady edges (persistence >= 0.8) for
     `min_outline` of its length (a smooth road's patch between moving lane lines has about
     none). Each patch is given as a stack of boxes `strip` of the height tall, so a slanted
-    pillar does not hide the road beside it."""
+    pillar does not hide the road beside it. `inside` (the picture within black bars) is where
+    it looks, and whose sides count (a still black bar is no part of the car)."""
+    ox, oy, ex, ey = inside if inside is not None else (0, 0, change.shape[1], change.shape[0])
+    change, persistence = change[oy:ey, ox:ex], persistence[oy:ey, ox:ex]
     h, w = change.shape
-    top = min(max(0, top), h - 1)
+    if h < 2 or w < 2:
+        return ()
+    top = min(max(0, top - oy), h - 1)
     reference = float(np.median(change[top:]))
     if reference <= 0:
         return ()
@@ -115,9 +121,8 @@ def fixed_part_boxes(
         for start in range(int(rows[0]), int(rows[-1]) + 1, tall):
             cols = np.flatnonzero(part[start : start + tall].any(axis=0))
             if len(cols):
-                boxes.append(
-                    (x + int(cols[0]), y + start, x + int(cols[-1]) + 1, y + min(bh, start + tall))
-                )
+                x0, y0 = ox + x + int(cols[0]), oy + y + start
+                boxes.append((x0, y0, ox + x + int(cols[-1]) + 1, oy + y + min(bh, start + tall)))
     return tuple(boxes)
 
 
@@ -149,9 +154,12 @@ class OverlayTracker:
         self.samples = 0
         self.boxes: tuple[Box, ...] = ()
 
-    def update(self, grey: NDArray[np.uint8], top: int = 0) -> tuple[Box, ...]:
+    def update(
+        self, grey: NDArray[np.uint8], top: int = 0, inside: Box | None = None
+    ) -> tuple[Box, ...]:
         """Take in one sample (a grey picture of `size`); the overlays' boxes as of it (parts of
-        the car are looked for below row `top`, the horizon: the sky is still too)."""
+        the car are looked for below row `top`, the horizon: the sky is still too, and within
+        `inside`, the picture inside black bars)."""
         edges = edge_map(grey)
         previous, self._previous = self._previous, edges
         if previous is not None and (edges & previous).sum() > self.still * max(1, edges.sum()):
@@ -164,6 +172,6 @@ class OverlayTracker:
             self.samples += 1
         if self.samples >= self.min_samples and (self.samples - self.min_samples) % self.every == 0:
             self.boxes = overlay_boxes(self._counts / self.samples) + fixed_part_boxes(
-                self._change / (self.samples - 1), self._counts / self.samples, top
+                self._change / (self.samples - 1), self._counts / self.samples, top, inside
             )
         return self.boxes

@@ -276,7 +276,8 @@ class SceneTracker:
         sampled = self._count % self.overlay_every == 0
         small = self._shrink(grey) if sampled or (self.fixed_horizon is None and due) else None
         if sampled and small is not None:
-            found = self._overlays.update(small, round(self._current.horizon_y * self._scale))
+            top = round(self._current.horizon_y * self._scale)
+            found = self._overlays.update(small, top, scale_box(live, self._scale))
             self._captions = tuple(scale_box(box, 1 / self._scale) for box in found)
         # Those in the live box (the bonnet's edge below it is no caption, and no road is there).
         overlays = tuple(b for b in self._captions if b[1] < live[3] and b[3] > live[1])

@@ -121,7 +121,7 @@ def test_a_still_mirror_is_found_and_a_smooth_road_is_not() -> None:
 
 def test_a_fixed_part_needs_a_steady_outline() -> None:
     """The rule on its own: the same still patch at the side is a part of the car with steady
-    edges around it, and road without them."""
+    edges around it, and road without them; black bars are not looked in."""
     change = np.full((100, 200), 6.0)
     change[40:70, 160:] = 0.2
     steady = np.zeros((100, 200))
@@ -130,6 +130,12 @@ def test_a_fixed_part_needs_a_steady_outline() -> None:
     boxes = fixed_part_boxes(change, steady, top=30)
     assert boxes and min(b[0] for b in boxes) == 160 and max(b[3] for b in boxes) == 70
     assert fixed_part_boxes(change, steady, top=75) == ()  # above the horizon: sky, not car
+    # A black bar at the side is still and outlined too: inside the bars only the patch counts.
+    change[:, :20] = 0.0
+    steady[:, 20] = 1.0
+    assert any(b[0] == 0 for b in fixed_part_boxes(change, steady, top=30))
+    inside = fixed_part_boxes(change, steady, top=30, inside=(20, 0, 200, 100))
+    assert inside == boxes
 
 
 def test_covered_share_of_windows() -> None:
