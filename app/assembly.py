@@ -41,11 +41,13 @@ def build_stages(
         lane_stage = LaneFinder(keep_debug=keep_debug)
     if vehicles:
         from vehicles.config import DetectorConfig
-        from vehicles.detector import VehicleDetector
-        from vehicles.model import default_verifier_path, load_model
+        from vehicles.detector import Scorer, VehicleDetector
+        from vehicles.model import default_small_paths, default_verifier_path, load_model
 
         classifier = classifier if classifier is not None else load_model(model)
         config = DetectorConfig().for_still() if still else DetectorConfig()
         checker = load_model(verifier or default_verifier_path()) if verify else None
-        vehicle_stage = VehicleDetector(classifier, config, keep_debug, checker)
+        small_path, small_checker = default_small_paths()
+        small = Scorer.of(load_model(small_path), load_model(small_checker) if verify else None)
+        vehicle_stage = VehicleDetector(classifier, config, keep_debug, checker, small)
     return Stages(lane_stage, vehicle_stage)

@@ -367,6 +367,10 @@ def train_command(
     c: Annotated[
         float | None, typer.Option("--c", help="SVM C (default: chosen by a grouped search).")
     ] = None,
+    patch: Annotated[
+        int,
+        typer.Option(help="Patch side in pixels: 64, or 32 for the model of the smallest windows."),
+    ] = 64,
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
@@ -377,6 +381,8 @@ def train_command(
 
     if c is not None and c <= 0:
         raise InputError(f"--c {c} must be positive")
+    if patch not in (32, 64):
+        raise InputError(f"--patch {patch} is not a model size; give 64 or 32")
     patches = load_patches(data)
     extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
     bar = Progress(len(patches), label="features", unit="patches/s")
@@ -386,8 +392,12 @@ def train_command(
         if done >= total:
             bar.close()  # the training log that follows starts on its own line
 
+    from vehicles.features import FeatureConfig
+
     model = train_model(
         patches,
+        # Spatial bins of 4 x 4 pixels at either size.
+        FeatureConfig(patch_size=patch, spatial_size=patch // 4),
         cfg=TrainConfig(n_jobs=jobs) if c is None else TrainConfig(c_grid=(c,), n_jobs=jobs),
         progress=progress,
         log=lambda m: typer.echo(m, err=True),

@@ -144,3 +144,9 @@ def test_a_missing_verifier_is_named(data_dir: Path, tmp_path: Path) -> None:
     assert_one_line_error(result, "--verifier", "does not exist", "'none'")
     assert not out.exists()
     assert run_cli("process", still, "-o", out, "--verifier", "none").returncode == 0
+
+
+def test_training_refuses_an_unknown_patch_size(tmp_path: Path) -> None:
+    result = run_cli("train", "--patch", "48", "--out", tmp_path / "m.npz")
+    assert_one_line_error(result, "--patch 48", "64 or 32")
+    assert not (tmp_path / "m.npz").exists()

@@ -15,12 +15,22 @@ class Band:
     left: float = 0.0  # band left / frame width
     right: float = 1.0
     step_cells: int = 1  # window step in HOG cells
+    # Not searched where its window would be smaller than this many pixels: a car that small has
+    # too few pixels for the classifier's 8-pixel cells, whatever its share of the picture.
+    min_window_px: float = 0.0
+    # A hit whose centre lies in a hit of windows at least this many times larger is a part of
+    # that vehicle (a small window fires on a near car's tail light) and does not heat; None: off.
+    part_ratio: float | None = None
+    # The patch size of the model that searches the band: the smallest windows are read by a
+    # 32 px model, a quarter of the pixels to compute (a band without its model is not searched).
+    patch: int = 64
 
 
 def _default_bands() -> tuple[Band, ...]:
-    # At 1280x720: 40, 64, 96, 128 and 192 px windows; small ones near the horizon (y ~ 420). The
-    # 40 px band covers the left three quarters: small vehicles there are far ahead or oncoming over
-    # the median, while on the right they are close and large. The larger bands reach half a window
+    # At 1280x720: 40, 64, 96, 128 and 192 px windows, and 24 px last (the interleaved halves are
+    # every other band: three and three); small ones near the horizon (y ~ 420). The 40 and 24 px
+    # bands cover the left three quarters: small vehicles there are far ahead or oncoming over the
+    # median, while on the right they are close and large. The larger bands reach half a window
     # past the frame's sides (mirrored) so a vehicle entering the frame is found.
     return (
         Band(window=40 / 720, top=400 / 720, bottom=472 / 720, left=0.0, right=0.75),
@@ -28,6 +38,16 @@ def _default_bands() -> tuple[Band, ...]:
         Band(window=96 / 720, top=388 / 720, bottom=548 / 720, left=-0.04, right=1.04),
         Band(window=128 / 720, top=384 / 720, bottom=592 / 720, left=-0.05, right=1.05),
         Band(window=192 / 720, top=380 / 720, bottom=668 / 720, left=-0.08, right=1.08),
+        # Cars 3-4 % of the height, far ahead or oncoming, where a 24 px window still has 20 px.
+        Band(
+            window=24 / 720,
+            top=408 / 720,
+            bottom=452 / 720,
+            right=0.75,
+            min_window_px=20.0,
+            part_ratio=2.0,
+            patch=32,
+        ),
     )
 
 

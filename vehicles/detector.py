@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,28 @@ class VehicleDebug:
     regions: Detections
     heat_threshold: float
     vetoed: NDArray[np.float64]  # (n, 4) windows the model was sure of and the verifier was not
+
+
+@dataclass(frozen=True, eq=False)
+class Scorer:
+    """A model and its optional verifier, with their weights for the dense search."""
+
+    model: VehicleModel
+    weights: LinearWeights
+    verifier: VehicleModel | None = None
+    verifier_weights: LinearWeights | None = None
+
+    @classmethod
+    def of(cls, model: VehicleModel, verifier: VehicleModel | None = None) -> Scorer:
+        """The scorer of `model`, checked by `verifier` (trained on the same features)."""
+        if verifier is not None and verifier.config != model.config:
+            raise ModelError("the verifier was trained on other features than the model")
+        return cls(
+            model,
+            LinearWeights.from_model(model),
+            verifier,
+            None if verifier is None else LinearWeights.from_model(verifier),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +84,30 @@ def covered_share(
     return np.asarray(np.minimum(inside / area, 1.0))
 
 
+def parts_of_larger(
+    hits: Sequence[BandHits], boxes: NDArray[np.float64], strong: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """Which of the `strong` windows (`boxes`: every band's windows of `hits`, in order) are a
+    part of a larger vehicle: windows of a band with a `part_ratio` whose centre lies in a strong
+    window at least that many times larger (a small window fires on a near car's tail light)."""
+    sizes = np.concatenate([np.full(len(hit.boxes), hit.window_px) for hit in hits])
+    ratios = np.concatenate([np.full(len(hit.boxes), hit.band.part_ratio or 0.0) for hit in hits])
+    parts = np.zeros(len(boxes), bool)
+    small = np.flatnonzero(strong & (ratios > 0))
+    if len(small) == 0:
+        return parts
+    centres = (boxes[small, :2] + boxes[small, 2:]) / 2
+    larger = strong[None, :] & (sizes[None, :] >= (ratios[small] * sizes[small])[:, None])
+    inside = (
+        (centres[:, None, 0] >= boxes[None, :, 0])
+        & (centres[:, None, 0] <= boxes[None, :, 2])
+        & (centres[:, None, 1] >= boxes[None, :, 1])
+        & (centres[:, None, 1] <= boxes[None, :, 3])
+    )
+    parts[small] = (larger & inside).any(axis=1)
+    return parts
+
+
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -74,14 +121,15 @@ class VehicleDetector:
         config: DetectorConfig | None = None,
         keep_debug: bool = False,
         verifier: VehicleModel | None = None,
+        small: Scorer | None = None,
     ) -> None:
-        if verifier is not None and verifier.config != model.config:
-            raise ModelError("the verifier was trained on other features than the model")
         self.model = model
         self.verifier = verifier
         self.config = config if config is not None else DetectorConfig()
-        self.weights = LinearWeights.from_model(model)
-        self.verifier_weights = LinearWeights.from_model(verifier) if verifier is not None else None
+        # The scorer of each band's patch size (`small`: the smallest windows' model, if any).
+        self.scorers = {model.config.patch_size: Scorer.of(model, verifier)}
+        if small is not None:
+            self.scorers.setdefault(small.model.config.patch_size, small)
         self.keep_debug = keep_debug
         self.heatmap = Heatmap(self.config.heat)
         # Region boxes come from heat averaged over the recent frames: centred that far back.
@@ -125,12 +173,13 @@ class VehicleDetector:
             search_band(
                 frame,
                 band,
-                self.weights,
+                self.scorers[band.patch].weights,
                 where,
                 self.config.reference_horizon,
-                self.verifier_weights,
+                self.scorers[band.patch].verifier_weights,
             )
             for band in bands
+            if band.patch in self.scorers
         )
         return tuple(hit for hit in found if hit is not None)
 
@@ -154,22 +203,42 @@ class VehicleDetector:
         self.frame_index += 1
         hits = self.search(frame, parity, view)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        proba = (
-            self.model.probability(np.concatenate([hit.decisions for hit in hits]))
-            if hits
-            else np.zeros(0)
+        scorers = [self.scorers[hit.band.patch] for hit in hits]
+        proba = np.concatenate(
+            [np.zeros(0)]
+            + [s.model.probability(hit.decisions) for s, hit in zip(scorers, hits, strict=True)]
         )
         strong = proba >= cfg.min_probability
-        vetoed = np.zeros((0, 4))
-        if self.verifier is not None and hits:
-            verified = np.concatenate([hit.verified for hit in hits if hit.verified is not None])
-            sure = self.verifier.probability(verified) >= cfg.min_verified
-            vetoed = boxes[strong & ~sure]
-            strong &= sure
+        # The verifier's P(vehicle) of each window; 1 where its band's model has none.
+        checked = np.concatenate(
+            [np.zeros(0)]
+            + [
+                np.ones(len(hit.decisions))
+                if s.verifier is None or hit.verified is None
+                else s.verifier.probability(hit.verified)
+                for s, hit in zip(scorers, hits, strict=True)
+            ]
+        )
+        sure = checked >= cfg.min_verified
+        vetoed = boxes[strong & ~sure]
+        strong &= sure
         if overlays:
             strong &= covered_share(boxes, overlays) < cfg.max_overlay
+        if hits:
+            strong &= ~parts_of_larger(hits, boxes, strong)
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
-        weight = (2.0 if parity is not None else 1.0) * proba[strong]
+        # A window steps one cell: a 4-cell model's windows step a quarter of their side, the
+        # 8-cell model's an eighth, so fewer of them overlap a small car: each of its hits heats
+        # 8 / 4 = 2 times as much (the square, 4, spoilt the boxes of 34-40 px cars; tried).
+        cells = self.model.config.cells_per_patch
+        density = np.concatenate(
+            [np.zeros(0)]
+            + [
+                np.full(len(hit.decisions), cells / s.model.config.cells_per_patch)
+                for s, hit in zip(scorers, hits, strict=True)
+            ]
+        )
+        weight = (2.0 if parity is not None else 1.0) * (proba * density)[strong]
         # Heat is kept over the live picture alone: windows reaching past its sides pile their
         # heat at its edge, as at a frame's edge, not into a black bar.
         lx0, ly0, lx1, ly1 = view.live

@@ -38,6 +38,12 @@ def default_verifier_path() -> Path:
     return Path(__file__).with_name("models") / "verifier.npz"
 
 
+def default_small_paths() -> tuple[Path, Path]:
+    """The committed 32 px model for the smallest windows, and its verifier (see `make train`)."""
+    folder = Path(__file__).with_name("models")
+    return folder / "small.npz", folder / "small_verifier.npz"
+
+
 @dataclass(frozen=True, eq=False)
 class VehicleModel:
     """Linear classifier on standardised patch features with calibrated probabilities."""

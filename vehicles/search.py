@@ -137,10 +137,10 @@ def search_band(
 ) -> BandHits | None:
     """Score every window of one band (HOG computed once for the band at its scale), by
     `weights` and, when given, by the `verifier` on the same features; None when the band does
-    not fit in the live picture."""
+    not fit in the live picture or its windows would be smaller than its `min_window_px`."""
     cfg = weights.config
     x0, y0, x1, y1, scale = band_geometry(band, view, cfg.patch_size, reference_horizon)
-    if y1 - y0 < scale * cfg.patch_size * 0.99:
+    if y1 - y0 < scale * cfg.patch_size * 0.99 or scale * cfg.patch_size < band.min_window_px:
         return None
     # A band may reach past the live picture's sides so cars entering it are covered: pad by
     # mirroring the picture there. A car cut by the edge and mirrored looks like a whole car (cars
