@@ -55,5 +55,9 @@ class LaneConfig:
     max_width_change_m: float = 1.8  # top vs bottom width: near parallel (pitch changes it)
     max_jump_m: float = 0.5  # x change of a line vs its smoothed fit: continuity
     min_radius_m: float = 50.0  # a lane bending tighter than this is not believed
+    # ... nor one running off more than this from straight ahead at the car: a lane change
+    # turns the car by 2-5 degrees, at 8 it would cross a lane in 26 m; the lines a car crosses
+    # at a junction (zebra stripes, kerbs of a side road) run off at 10-20 degrees.
+    max_heading_deg: float = 8.0
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24

@@ -260,6 +260,7 @@ class LaneFinder:
             (cfg.min_lane_width_m, cfg.max_lane_width_m),
             cfg.max_width_change_m,
             cfg.min_radius_m,
+            cfg.max_heading_deg,
         )
         if doubt is not None:
             return None, doubt

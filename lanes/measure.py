@@ -40,10 +40,13 @@ def implausible_lane(
     width_m: tuple[float, float],
     max_width_change_m: float,
     min_radius_m: float,
+    max_heading_deg: float = 90.0,
 ) -> str | None:
     """Why a pair of boundaries is not a lane a road can have, or None when it is: its width in
     metres outside `width_m` at any of `rows`, the two not near parallel (widths differing by
-    more than `max_width_change_m`), or either bending tighter than `min_radius_m`."""
+    more than `max_width_change_m`), either bending tighter than `min_radius_m`, or the lane
+    running off more than `max_heading_deg` from straight ahead at the last of `rows` (the
+    car's): a car drives along its lane, and lines it crosses at a junction are no lane of its."""
     widths = lane_widths(left, right, rows) * xm_per_px
     if widths.min() < width_m[0] or widths.max() > width_m[1]:
         return f"width {widths.min():.2f}-{widths.max():.2f} m"
@@ -56,4 +59,9 @@ def implausible_lane(
     )
     if radius < min_radius_m:
         return f"bends at a {radius:.0f} m radius"
+    y = float(rows[-1])
+    slope = np.mean([2 * fit[0] * y + fit[1] for fit in (left, right)]) * xm_per_px / ym_per_px
+    heading = math.degrees(math.atan(abs(float(slope))))
+    if heading > max_heading_deg:
+        return f"runs {heading:.0f} degrees off straight ahead"
     return None

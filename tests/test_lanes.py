@@ -152,6 +152,20 @@ def test_the_finder_believes_only_a_lane_a_road_can_have(
     assert (doubt is None) if why is None else (doubt is not None and why in doubt), doubt
 
 
+@pytest.mark.parametrize(("degrees", "believed"), [(0.0, True), (5.0, True), (10.0, False)])
+def test_a_lane_running_off_across_the_cars_path_is_not_believed(
+    degrees: float, believed: bool
+) -> None:
+    """A lane change turns the car 2-5 degrees off its lane; lines at 10 degrees and more are
+    ones it crosses (zebra stripes, the kerbs of a side road at a junction)."""
+    xm, ym, rows = 0.01, 0.05, np.array([0.0, 200.0, 400.0])
+    slope = np.tan(np.radians(degrees)) * ym / xm  # px of x per px of y
+    left, right = np.array([0.0, slope, 0.0]), np.array([0.0, slope, 370.0])
+    doubt = implausible_lane(left, right, rows, xm, ym, (2.6, 5.6), 1.8, 50.0, 8.0)
+    assert (doubt is None) == believed, doubt
+    assert implausible_lane(left, right, rows, xm, ym, (2.6, 5.6), 1.8, 50.0) is None
+
+
 def test_a_camera_turned_sideways_keeps_the_road_upright_in_the_birdseye_view() -> None:
     # The road's vanishing point 150 px left of the picture's centre (a camera turned right).
     size, vp = (960, 540), (330.0, 250.0)
@@ -173,12 +187,17 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
 ) -> None:
     # The Indian highway's camera looks right of the road: its vanishing point is 14 % of the
     # width left of the centre. With the warp upright on it a lane is found in 84 % of the frames
-    # (65 % with the warp centred, where the lines ran slanted out of the search windows).
+    # (65 % with the warp centred, where the lines ran slanted out of the search windows): 89 %
+    # of those outside the junction the car crosses at walking pace (34.5-41 s), checked by
+    # eye. Over the junction's zebra crossing (34.6-37.7 s) there is no lane of ours, and none
+    # is drawn in 85 % of the frames (13 % before lanes running 8 degrees off were doubted).
     rows = process_clip(
         wild_dir / "india_highway_wildfilms.mp4", tmp_path, "--no-vehicles", "--calibration", "none"
     )
-    found = sum(r["lane"] is not None for r in rows)
-    assert found >= 0.8 * len(rows)
+    road = [r for r in rows if not 34.5 <= r["time_s"] < 41.0]
+    assert sum(r["lane"] is not None for r in road) >= 0.85 * len(road)
+    zebra = [r for r in rows if 34.6 <= r["time_s"] < 37.7]
+    assert sum(r["lane"] is None for r in zebra) >= 0.75 * len(zebra)
     # Its watermark is in the record from its sixth second on, in the lower half.
     assert all(r["overlays"] for r in rows if r["time_s"] >= 6.0)
     assert all(y0 > rows[0]["size"][1] / 2 for r in rows for _, y0, _, _ in r["overlays"])
