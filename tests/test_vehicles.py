@@ -463,3 +463,27 @@ def test_precision_holds_when_the_frame_moves_by_a_few_pixels(
         fp += scores["false_positives"]
         frames += v["frames_scored"]
     assert tp / (tp + fp) >= 0.95 and fp / frames <= 0.05
+
+
+@pytest.mark.slow
+def test_a_car_leaving_at_the_side_is_not_shown_as_a_sliver(data_dir: Path, tmp_path: Path) -> None:
+    """project_cut_1 re-encoded blocky (x264 ultrafast, as `make bench`'s blocky row): an
+    oncoming car leaves at the left edge, and its track coasted out with its left edge held at
+    the picture's edge, a box 27, 15, then 2 px wide. Nothing thinner than the smallest box
+    found (3 % of the height) is shown, and nothing sits at the edge once the car is gone."""
+    from app.reframe import Framing, write_reframed
+    from app.sinks import FAST_PRESET
+
+    calibration = load_calibration(default_calibration_path())
+    blocky = tmp_path / "project_cut_1.mp4"
+    write_reframed(
+        data_dir / "videos" / "project_cut_1.mp4",
+        Framing("as is"),
+        blocky,
+        calibration,
+        FAST_PRESET,
+    )
+    rows = process_clip(blocky, tmp_path, "--calibration", "none", "--no-lanes")
+    sides = [min(b[2] - b[0], b[3] - b[1]) for r in rows for b in (v["box"] for v in r["vehicles"])]
+    assert sides and min(sides) >= 0.03 * 720
+    assert not any(v["box"][0] < 1 for r in rows[45:48] for v in r["vehicles"])

@@ -37,6 +37,10 @@ class Detections:
     def __len__(self) -> int:
         return len(self.scores)
 
+    def subset(self, keep: NDArray[np.bool_]) -> Detections:
+        """The detections where `keep` is true."""
+        return Detections(self.boxes[keep], self.scores[keep], self.ids[keep])
+
     def clipped(self, region: tuple[float, float, float, float]) -> Detections:
         """The same detections with boxes cut to `region` (x0, y0, x1, y1: the frame, or the
         live picture inside black bars)."""

@@ -262,6 +262,12 @@ class VehicleDetector:
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
         picture = (float(lx0), float(ly0), float(lx1), float(ly1))
         shown = self.tracker.update(regions, picture).clipped(picture)
+        # A car leaving at the side coasts out with its outer edge held at the picture's edge
+        # (its boxes were cut there): once its box is thinner than any found, it has left.
+        sides = np.minimum(
+            shown.boxes[:, 2] - shown.boxes[:, 0], shown.boxes[:, 3] - shown.boxes[:, 1]
+        )
+        shown = shown.subset(sides >= cfg.min_box * view.scale_height)
         debug = (
             VehicleDebug(
                 hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold, vetoed
