@@ -109,7 +109,7 @@ class DetectorConfig:
     # the rise is at least `bottom_min_rise` grey levels (see vehicles/refine.py).
     bottom_reach: tuple[float, float] | None = (0.3, 0.3)
     bottom_min_rise: float = 8.0
-    min_box: float = 0.03  # smallest box side reported / frame height
+    min_box: float = 0.025  # smallest box side reported / frame height
     # Video frames alternate between two halves of the bands (the heat history spans both).
     interleave: bool = True
     heat: HeatConfig = field(default_factory=HeatConfig)
