@@ -15,7 +15,8 @@ from camera_cal.overlay import OverlayTracker, fixed_part_boxes, overlay_boxes
 from camera_cal.scene import SceneTracker
 from tests.helpers import moving_road, process_clip, run_cli
 from vehicles.config import DetectorConfig
-from vehicles.detector import VehicleDetector, covered_share
+from vehicles.detections import covered_share
+from vehicles.detector import VehicleDetector
 from vehicles.model import default_model_path, load_model
 
 Box = tuple[int, int, int, int]

@@ -79,3 +79,19 @@ def inside_share(
     """Share of each box's area that lies inside `region` (x0, y0, x1, y1)."""
     frame = np.array([region], np.float64)
     return np.asarray(_intersection(boxes, frame)[:, 0] / np.maximum(_area(boxes), 1e-9))
+
+
+def covered_share(
+    boxes: NDArray[np.float64], hidden: tuple[tuple[int, int, int, int], ...]
+) -> NDArray[np.float64]:
+    """The share of each box that the `hidden` boxes cover (they are taken not to overlap each
+    other)."""
+    if not hidden or len(boxes) == 0:
+        return np.zeros(len(boxes))
+    inside = _intersection(boxes, np.asarray(hidden, np.float64)).sum(axis=1)
+    return np.asarray(np.minimum(inside / np.maximum(_area(boxes), 1e-9), 1.0))
+
+
+def smaller_sides(boxes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each box's width or height, whichever is less."""
+    return np.asarray(np.minimum(boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]))

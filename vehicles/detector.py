@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vehicles.config import DetectorConfig
-from vehicles.detections import Detections
+from vehicles.detections import Detections, covered_share, smaller_sides
 from vehicles.heatmap import Heatmap
 from vehicles.model import ModelError, VehicleModel
 from vehicles.refine import snap_bottoms
@@ -65,23 +65,6 @@ def footprint(
     """The `part` (x0, y0, x1, y1 as fractions of width and height) of each box."""
     size = np.tile(boxes[:, 2:] - boxes[:, :2], 2)
     return np.asarray(np.tile(boxes[:, :2], 2) + size * np.asarray(part))
-
-
-def covered_share(
-    boxes: NDArray[np.float64], hidden: tuple[tuple[int, int, int, int], ...]
-) -> NDArray[np.float64]:
-    """The share of each box (x0, y0, x1, y1) that the `hidden` boxes cover (they are taken
-    not to overlap each other)."""
-    if not hidden or len(boxes) == 0:
-        return np.zeros(len(boxes))
-    other = np.asarray(hidden, np.float64)
-    x0 = np.maximum(boxes[:, None, 0], other[None, :, 0])
-    y0 = np.maximum(boxes[:, None, 1], other[None, :, 1])
-    x1 = np.minimum(boxes[:, None, 2], other[None, :, 2])
-    y1 = np.minimum(boxes[:, None, 3], other[None, :, 3])
-    inside = (np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)).sum(axis=1)
-    area = np.maximum((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]), 1e-9)
-    return np.asarray(np.minimum(inside / area, 1.0))
 
 
 def parts_of_larger(
@@ -251,12 +234,7 @@ class VehicleDetector:
             region_boxes = snap_bottoms(
                 frame, region_boxes, view.live, cfg.bottom_reach, cfg.bottom_min_rise
             )
-        big = (
-            np.minimum(
-                region_boxes[:, 2] - region_boxes[:, 0], region_boxes[:, 3] - region_boxes[:, 1]
-            )
-            >= cfg.min_box * view.scale_height
-        )
+        big = smaller_sides(region_boxes) >= cfg.min_box * view.scale_height
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
@@ -264,10 +242,7 @@ class VehicleDetector:
         shown = self.tracker.update(regions, picture).clipped(picture)
         # A car leaving at the side coasts out with its outer edge held at the picture's edge
         # (its boxes were cut there): once its box is thinner than any found, it has left.
-        sides = np.minimum(
-            shown.boxes[:, 2] - shown.boxes[:, 0], shown.boxes[:, 3] - shown.boxes[:, 1]
-        )
-        shown = shown.subset(sides >= cfg.min_box * view.scale_height)
+        shown = shown.subset(smaller_sides(shown.boxes) >= cfg.min_box * view.scale_height)
         debug = (
             VehicleDebug(
                 hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold, vetoed
