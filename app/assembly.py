@@ -27,12 +27,14 @@ def build_stages(
     classifier: VehicleModel | None = None,
     verifier: Path | None = None,
     verify: bool = True,
+    small: bool = True,
 ) -> Stages:
     """The stages that are switched on.
 
     For a still there is no history: every band is searched and nothing waits for confirmation.
     A `classifier` already loaded is used instead of loading `model`. The vehicle stage's windows
     are also checked by the `verifier` model (the shipped one by default) unless `verify` is off.
+    The smallest windows are read by the shipped 32 px model unless `small` is off.
     """
     lane_stage = vehicle_stage = None
     if lanes:
@@ -48,6 +50,10 @@ def build_stages(
         config = DetectorConfig().for_still() if still else DetectorConfig()
         checker = load_model(verifier or default_verifier_path()) if verify else None
         small_path, small_checker = default_small_paths()
-        small = Scorer.of(load_model(small_path), load_model(small_checker) if verify else None)
-        vehicle_stage = VehicleDetector(classifier, config, keep_debug, checker, small)
+        twin = (
+            Scorer.of(load_model(small_path), load_model(small_checker) if verify else None)
+            if small
+            else None
+        )
+        vehicle_stage = VehicleDetector(classifier, config, keep_debug, checker, twin)
     return Stages(lane_stage, vehicle_stage)

@@ -433,7 +433,8 @@ def mine_command(
     for video in videos:
         if not video.is_file():
             raise InputError(f"{video} does not exist; give clips without vehicles to mine")
-    detector = build_stages(lanes=False, model=model, verify=False).vehicles
+    # The 64 px model's false alarms, as mined for the shipped verifiers (both learn them).
+    detector = build_stages(lanes=False, model=model, verify=False, small=False).vehicles
     assert detector is not None
     total = mine_clips(videos, detector, out, share, every, log=typer.echo)
     typer.echo(f"wrote {total} patches to {out}")

@@ -166,6 +166,29 @@ class VehicleDetector:
         )
         return tuple(hit for hit in found if hit is not None)
 
+    def window_terms(
+        self, hits: Sequence[BandHits]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """For every window of `hits`, in order: P(vehicle) by its band's model, its verifier's
+        P(vehicle) (1 where that model has none), and the weight of its heat. A window steps one
+        cell: a 4-cell model's windows step a quarter of their side, the 8-cell model's an
+        eighth, so fewer of them overlap a small car: each of its hits heats 8 / 4 = 2 times as
+        much (the square, 4, spoilt the boxes of 34-40 px cars; tried)."""
+        cells = self.model.config.cells_per_patch
+        terms: list[tuple[NDArray[np.float64], ...]] = [(np.zeros(0),) * 3]
+        for hit in hits:
+            scorer = self.scorers[hit.band.patch]
+            n = len(hit.decisions)
+            checked = (
+                np.ones(n)
+                if scorer.verifier is None or hit.verified is None
+                else scorer.verifier.probability(hit.verified)
+            )
+            density = np.full(n, cells / scorer.model.config.cells_per_patch)
+            terms.append((scorer.model.probability(hit.decisions), checked, density))
+        proba, checked, density = (np.concatenate(part) for part in zip(*terms, strict=True))
+        return proba, checked, density
+
     def process(
         self,
         frame: NDArray[np.uint8],
@@ -186,22 +209,8 @@ class VehicleDetector:
         self.frame_index += 1
         hits = self.search(frame, parity, view)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        scorers = [self.scorers[hit.band.patch] for hit in hits]
-        proba = np.concatenate(
-            [np.zeros(0)]
-            + [s.model.probability(hit.decisions) for s, hit in zip(scorers, hits, strict=True)]
-        )
+        proba, checked, density = self.window_terms(hits)
         strong = proba >= cfg.min_probability
-        # The verifier's P(vehicle) of each window; 1 where its band's model has none.
-        checked = np.concatenate(
-            [np.zeros(0)]
-            + [
-                np.ones(len(hit.decisions))
-                if s.verifier is None or hit.verified is None
-                else s.verifier.probability(hit.verified)
-                for s, hit in zip(scorers, hits, strict=True)
-            ]
-        )
         sure = checked >= cfg.min_verified
         vetoed = boxes[strong & ~sure]
         strong &= sure
@@ -210,17 +219,6 @@ class VehicleDetector:
         if hits:
             strong &= ~parts_of_larger(hits, boxes, strong)
         # Interleaved frames search half the bands: double their weight to keep heat comparable.
-        # A window steps one cell: a 4-cell model's windows step a quarter of their side, the
-        # 8-cell model's an eighth, so fewer of them overlap a small car: each of its hits heats
-        # 8 / 4 = 2 times as much (the square, 4, spoilt the boxes of 34-40 px cars; tried).
-        cells = self.model.config.cells_per_patch
-        density = np.concatenate(
-            [np.zeros(0)]
-            + [
-                np.full(len(hit.decisions), cells / s.model.config.cells_per_patch)
-                for s, hit in zip(scorers, hits, strict=True)
-            ]
-        )
         weight = (2.0 if parity is not None else 1.0) * (proba * density)[strong]
         # Heat is kept over the live picture alone: windows reaching past its sides pile their
         # heat at its edge, as at a frame's edge, not into a black bar.
