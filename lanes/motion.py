@@ -31,7 +31,8 @@ def road_shift(
     """Rows the road moved towards the camera from `previous` to `current` (same-size grey
     bird's-eye images), or None when the correlation peak is too weak to trust."""
     window = cv2.createHanningWindow((current.shape[1], current.shape[0]), cv2.CV_32F)
-    (_, dy), response = cv2.phaseCorrelate(previous, current, window)
+    # Copies: with a window, OpenCV multiplies its inputs by it in place.
+    (_, dy), response = cv2.phaseCorrelate(previous.copy(), current.copy(), window)
     return float(dy) if response >= min_response else None
 
 
@@ -46,26 +47,42 @@ def trimmed_mean(values: Iterable[float], cut: float) -> float:
 class RoadMotion:
     """History for ego motion: the previous view and the recent advances (the mean of the middle
     60 % of the last `smoothing` frames: single measurements scatter by up to 20 %, a car's speed
-    does not; a plain median is biased where the scatter is lopsided)."""
+    does not; a plain median is biased where the scatter is lopsided).
 
-    def __init__(self, smoothing: int = 15, min_response: float = 0.2) -> None:
+    A frame whose near road differs from the previous one by less than `repeat_level` grey levels
+    on average is a repeat (video converted from a variable frame rate repeats frames; a moving
+    road changes by several levels): it is not measured, and the next shift is spread over the
+    frames since the last new one.
+    """
+
+    def __init__(
+        self, smoothing: int = 15, min_response: float = 0.2, repeat_level: float = 0.25
+    ) -> None:
         self.min_response = min_response
+        self.repeat_level = repeat_level
         self.recent: deque[float] = deque(maxlen=smoothing)
         self._previous: NDArray[np.float32] | None = None
+        self._frames = 1  # frames from the previous new view to this one
 
     def reset(self) -> None:
         """Forget the previous view and the recent advances."""
         self.recent.clear()
         self._previous = None
+        self._frames = 1
 
     def update(self, birdseye_rgb: NDArray[np.uint8], ym_per_px: float) -> float | None:
         """Metres the car advanced since the previous frame (smoothed over the recent measurements),
         or None until a measurement is trusted."""
         grey = cv2.cvtColor(birdseye_rgb, cv2.COLOR_RGB2GRAY)
         near = np.asarray(grey[-dft_rows(round(grey.shape[0] * NEAR_PART)) :], np.float32)
-        if self._previous is not None and self._previous.shape == near.shape:
-            shift = road_shift(self._previous, near, self.min_response)
+        previous = self._previous
+        if previous is not None and previous.shape == near.shape:
+            if float(cv2.norm(near, previous, cv2.NORM_L1)) < self.repeat_level * near.size:
+                self._frames += 1  # a repeated frame: the road has not been seen to move
+                return trimmed_mean(self.recent, 0.2) if self.recent else None
+            shift = road_shift(previous, near, self.min_response)
             if shift is not None:
-                self.recent.append(shift * ym_per_px)
+                self.recent.extend([shift * ym_per_px / self._frames] * self._frames)
         self._previous = near
+        self._frames = 1
         return trimmed_mean(self.recent, 0.2) if self.recent else None

@@ -68,6 +68,25 @@ def test_road_motion_measures_a_known_shift() -> None:
     assert all(a is not None and abs(a - step * 0.125) < 0.02 for a in advances[1:])
 
 
+def test_road_motion_spreads_a_shift_over_repeated_frames() -> None:
+    """Video converted from a variable frame rate repeats frames: a view shown twice (with
+    a little noise, as re-encoded) moved the road by nothing in between, so the next shift
+    is two frames' advance and the speed per frame is half the shift between views."""
+    rng = np.random.default_rng(0)
+    road = cv2.GaussianBlur((rng.random((900, 512)) * 255).astype(np.uint8), (5, 5), 0)
+    motion = RoadMotion()
+    step = 8  # rows between distinct views, shown two frames each: 4 rows a frame
+    advances = []
+    for k in range(12):
+        view = road[300 - k * step : 300 - k * step + 216]
+        for _ in range(2):
+            noise = rng.integers(-1, 2, view.shape) * (rng.random(view.shape) < 0.05)
+            shown = np.clip(view.astype(np.int16) + noise, 0, 255).astype(np.uint8)
+            advances.append(motion.update(np.dstack([shown] * 3), 0.125))
+    assert advances[:2] == [None, None]
+    assert all(a is not None and abs(a - step / 2 * 0.125) < 0.02 for a in advances[2:])
+
+
 def _dash_centres(painted: np.ndarray, min_len: int, max_hole: int) -> list[float]:
     """Rows of the centres of the whole dashes along a line's paint profile (top to bottom):
     runs of paint at least `min_len` rows long once holes up to `max_hole` rows are closed (a
