@@ -116,14 +116,20 @@ class FrameFacts:
 class FactsTracker:
     """History for the facts: each track's smoothed distance (for its closing speed).
 
-    Distances are smoothed along a track (exponential, weight `smoothing` on the new value) and
-    the closing speed is the slope of the smoothed distance over the last `window` frames.
+    Distances are smoothed along a track (exponential, weight `smoothing` on the new value at
+    `frame_rate`, so that the same time is averaged at any `fps`) and the closing speed is the
+    slope of the smoothed distance over the last `window_s` seconds (at least 3 frames).
     """
 
-    def __init__(self, fps: float, smoothing: float = 0.3, window: int = 10) -> None:
+    def __init__(
+        self, fps: float, smoothing: float = 0.3, window_s: float = 0.4, frame_rate: float = 25.0
+    ) -> None:
         self.fps = fps
-        self.smoothing = smoothing
-        self.window = window
+        rate = fps if fps > 0 else frame_rate
+        # The weight left on the past after one of this video's frames, as after the same time
+        # at the reference rate.
+        self.smoothing = 1 - (1 - smoothing) ** (frame_rate / rate)
+        self.window = max(3, round(window_s * rate))
         self._distances: dict[int, deque[float]] = {}
 
     def reset(self) -> None:

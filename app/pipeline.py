@@ -27,6 +27,7 @@ from camera_cal import (
     Undistorter,
     build_undistorter,
     calibrated_scale_height,
+    horizon_estimates,
 )
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
@@ -148,7 +149,13 @@ class Pipeline:
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
-        self._scene = SceneTracker(size, self._geometry.horizon_y, self.horizon_y, fixed_scale=lens)
+        self._scene = SceneTracker(
+            size,
+            self._geometry.horizon_y,
+            self.horizon_y,
+            fixed_scale=lens,
+            min_estimates=horizon_estimates(fps),
+        )
         self._facts = FactsTracker(fps)
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0
@@ -158,9 +165,9 @@ class Pipeline:
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:
             self.close()  # a larger frame than the slots hold: start the worker again
         for stage in self._stages:
-            stage.reset()
+            stage.reset(fps)
         if self._worker is not None:
-            self._worker.reset()
+            self._worker.reset(fps)
         elif self.vehicles_in_worker and self.vehicles is not None:
             # Forked now, before any reader/writer thread exists, with fresh stage history.
             self._worker = StageWorker(self.vehicles, frame_bytes)

@@ -27,6 +27,7 @@ class FrameStage(Protocol):
         """Analyse one frame; history classes update here."""
         ...
 
-    def reset(self) -> None:
-        """Forget all history (a new clip starts)."""
+    def reset(self, fps: float | None = None) -> None:
+        """Forget all history (a new clip starts); with `fps`, its frames come at that rate,
+        which the history's frame counts follow so as to cover the same time."""
         ...

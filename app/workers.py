@@ -51,7 +51,7 @@ def _serve(
                 result = stage.process(frame, **context)
                 reply = ("ok", (result, (time.perf_counter() - t0) * 1000))
             elif command == "reset":
-                stage.reset()
+                stage.reset(argument)
                 reply = ("ok", None)
             else:
                 return
@@ -116,11 +116,11 @@ class StageWorker:
         result: tuple[object, float] = self._answer()
         return result
 
-    def reset(self) -> None:
-        """Forget the stage's history (waits for frames still in flight)."""
+    def reset(self, fps: float | None = None) -> None:
+        """Forget the stage's history, now for frames at `fps` (waits for frames in flight)."""
         while self._pending:
             self.collect()
-        self._conn.send(("reset", None))
+        self._conn.send(("reset", fps))
         self._answer()
 
     def close(self) -> None:

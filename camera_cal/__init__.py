@@ -10,7 +10,7 @@ from camera_cal.calibration import (
     load_calibration,
     save_calibration,
 )
-from camera_cal.scene import SceneGeometry, SceneTracker
+from camera_cal.scene import SceneGeometry, SceneTracker, horizon_estimates
 from camera_cal.undistort import (
     CalibrationMismatch,
     Undistorter,
@@ -32,6 +32,7 @@ __all__ = [
     "default_calibration_path",
     "find_board_corners",
     "fits",
+    "horizon_estimates",
     "load_calibration",
     "save_calibration",
 ]

@@ -163,6 +163,16 @@ def vanishing_point(
     return np.asarray(point, np.float64)
 
 
+def horizon_estimates(fps: float, count: int = 5, frame_rate: float = 25.0, least: int = 3) -> int:
+    """How many frames' vanishing points make the first horizon in video at `fps` (0: unknown):
+    `count` at `frame_rate` and above, at lower rates as many as span the same time, but at least
+    `least` (frames further apart are more independent; too few, and one stray line moves the
+    median). The estimate keeps improving with every frame after."""
+    if fps <= 0:
+        return count
+    return max(least, min(count, round(count * fps / frame_rate)))
+
+
 class SceneTracker:
     """History for the scene geometry: the brightest value seen per row and column (for the
     bars), each row's change between frames `motion_every` apart (for a bonnet), the edges of

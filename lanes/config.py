@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 
 @dataclass(frozen=True)
@@ -47,9 +47,11 @@ class LaneConfig:
     heading_prior: float = 0.01  # the lane centre's direction at the bottom row
     near_width_prior: float = 0.2  # the lane width at the bottom row, in pixels
     outlier_m: float = 0.25  # pixels farther than this from a first fit are dropped, then refit
-    # History and sanity checks.
+    # History and sanity checks (frame counts at `frame_rate`; `at_rate` keeps their time).
     history: int = 3
     max_misses: int = 6
+    motion_smoothing: int = 15  # frames of road advance averaged for the speed
+    frame_rate: float = 25.0
     min_lane_width_m: float = 2.6
     max_lane_width_m: float = 5.6
     max_width_change_m: float = 1.8  # top vs bottom width: near parallel (pitch changes it)
@@ -61,3 +63,20 @@ class LaneConfig:
     max_heading_deg: float = 8.0
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24
+
+    def at_rate(self, fps: float) -> LaneConfig:
+        """The same settings for video at `fps` frames a second: the lines' history, the misses
+        they survive and the advances averaged cover the same time (at least a frame)."""
+        if fps <= 0 or fps == self.frame_rate:
+            return self
+
+        def frames(count: int) -> int:
+            return max(1, round(count * fps / self.frame_rate))
+
+        return replace(
+            self,
+            history=frames(self.history),
+            max_misses=frames(self.max_misses),
+            motion_smoothing=frames(self.motion_smoothing),
+            frame_rate=fps,
+        )

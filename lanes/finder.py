@@ -69,16 +69,25 @@ class LaneFinder:
     def __init__(self, config: LaneConfig | None = None, keep_debug: bool = False) -> None:
         self.config = config if config is not None else LaneConfig()
         self.keep_debug = keep_debug
-        self.left = Line(self.config.history, self.config.max_misses)
-        self.right = Line(self.config.history, self.config.max_misses)
-        self.motion = RoadMotion()
+        self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
+        self.left, self.right, self.motion = self._fresh_history()
         self._view: BirdsEye | None = None
 
-    def reset(self) -> None:
-        """Forget both lines' history and the road's motion."""
-        self.left.reset()
-        self.right.reset()
-        self.motion.reset()
+    def _fresh_history(self) -> tuple[Line, Line, RoadMotion]:
+        """Empty lines and road motion whose lengths cover the config's time at `fps`."""
+        timed = self.config.at_rate(self.fps)
+        return (
+            Line(timed.history, timed.max_misses),
+            Line(timed.history, timed.max_misses),
+            RoadMotion(timed.motion_smoothing),
+        )
+
+    def reset(self, fps: float | None = None) -> None:
+        """Forget both lines' history and the road's motion; with `fps`, frames now come at
+        that rate (the history keeps covering the same time)."""
+        if fps is not None:
+            self.fps = fps
+        self.left, self.right, self.motion = self._fresh_history()
 
     def view(
         self,

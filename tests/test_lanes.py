@@ -214,3 +214,20 @@ def test_a_larger_frame_keeps_the_720_row_birdseye_view() -> None:
     points = np.array([[500.0, 600.0], [700.0, 480.0], [900.0, 650.0]])
     np.testing.assert_allclose(full.to_birdseye(points * 1.5), hd.to_birdseye(points), atol=1e-3)
     assert full.xm_per_px == pytest.approx(hd.xm_per_px)
+
+
+@pytest.mark.parametrize("fps", [12.5, 25.0, 30.0, 60.0])
+def test_a_line_survives_the_same_gap_in_seconds_at_any_frame_rate(fps: float) -> None:
+    """A finder told the clip's frame rate keeps a line's history through as long a run of
+    rejected frames as at 25 fps (within half a frame), then searches afresh."""
+    finder = LaneFinder()
+    finder.reset(fps)
+    line = finder.left
+    for _ in range(3):
+        line.accept(np.array([1e-4, 0.01, 240.0]))
+    survived = -1  # rejections after which the history is still there
+    while line.smoothed is not None and survived < 100:
+        line.reject()
+        survived += 1
+    at_25 = LaneConfig().max_misses
+    assert abs(survived / fps - at_25 / 25) <= 0.5 / fps + 1e-9

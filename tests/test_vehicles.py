@@ -490,3 +490,25 @@ def test_a_car_leaving_at_the_side_is_not_shown_as_a_sliver(data_dir: Path, tmp_
     sides = [min(b[2] - b[0], b[3] - b[1]) for r in rows for b in (v["box"] for v in r["vehicles"])]
     assert sides and min(sides) >= DetectorConfig().min_box * 720
     assert not any(v["box"][0] < 1 for r in rows[45:48] for v in r["vehicles"])
+
+
+@pytest.mark.parametrize("fps", [12.5, 15.0, 25.0, 30.0, 50.0, 60.0])
+def test_a_car_is_shown_and_dropped_after_the_same_time_at_any_frame_rate(
+    model: VehicleModel, fps: float
+) -> None:
+    """A detector told the clip's frame rate shows a steady car after the same time as at
+    25 fps (0.16 s, within half a frame), keeps it through as long a gap, and averages heat over
+    as long (0.32 s): its history is counted in seconds, not frames."""
+    at_25 = DetectorConfig()
+    detector = VehicleDetector(model, at_25)
+    detector.reset(fps)
+    car = Detections.from_boxes(np.array([[400.0, 400, 500, 470]]), np.ones(1))
+    none = Detections.from_boxes(np.zeros((0, 4)), np.zeros(0))
+    frames_to_show = next(k for k in range(1, 60) if len(detector.tracker.update(car)))
+    frames_shown_unseen = next(k for k in range(60) if not len(detector.tracker.update(none)))
+    half_frame = 0.5 / fps + 1e-9
+    assert abs(frames_to_show / fps - at_25.track.confirm_frames / 25) <= half_frame
+    assert abs(frames_shown_unseen / fps - at_25.track.show_missed / 25) <= half_frame
+    assert abs(detector.heatmap.frames.maxlen / fps - at_25.heat.history / 25) <= half_frame
+    detector.reset()  # a new clip at the same rate
+    assert detector.heatmap.frames.maxlen == round(at_25.heat.history * fps / 25)

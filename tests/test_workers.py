@@ -42,7 +42,7 @@ class Counter:
             raise ValueError(f"{self.key} failed on frame {self.count}")
         return Seen(self.count, float(frame.mean()))
 
-    def reset(self) -> None:
+    def reset(self, fps: float | None = None) -> None:
         self.count = 0
 
 

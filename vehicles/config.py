@@ -114,6 +114,28 @@ class DetectorConfig:
     interleave: bool = True
     heat: HeatConfig = field(default_factory=HeatConfig)
     track: TrackConfig = field(default_factory=TrackConfig)
+    # The frame rate the frame counts of `heat` and `track` are for: at another rate they cover
+    # the same time (`at_rate`), so a car is shown, kept and dropped after as many seconds.
+    frame_rate: float = 25.0
+
+    def at_rate(self, fps: float) -> DetectorConfig:
+        """The same settings for video at `fps` frames a second: the heat history and the
+        tracker's counts scaled to cover the same time (at least a frame; `recent` stays two
+        frames, one of each interleaved half of the bands)."""
+        if fps <= 0 or fps == self.frame_rate:
+            return self
+
+        def frames(count: int) -> int:
+            return max(1, round(count * fps / self.frame_rate))
+
+        heat = replace(self.heat, history=max(self.heat.recent, frames(self.heat.history)))
+        track = replace(
+            self.track,
+            confirm_frames=frames(self.track.confirm_frames),
+            max_missed=frames(self.track.max_missed),
+            show_missed=frames(self.track.show_missed),
+        )
+        return replace(self, heat=heat, track=track, frame_rate=fps)
 
     def for_still(self) -> DetectorConfig:
         """The same search for a single image: every band, no history to wait for or average."""

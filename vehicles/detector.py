@@ -114,15 +114,22 @@ class VehicleDetector:
         if small is not None:
             self.scorers.setdefault(small.model.config.patch_size, small)
         self.keep_debug = keep_debug
-        self.heatmap = Heatmap(self.config.heat)
-        # Region boxes come from heat averaged over the recent frames: centred that far back.
-        self.tracker = Tracker(self.config.track, lag=(self.config.heat.recent - 1) / 2)
+        self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
+        self.heatmap, self.tracker = self._fresh_history()
         self.frame_index = 0
 
-    def reset(self) -> None:
-        """Forget heat and tracks."""
-        self.heatmap.reset()
-        self.tracker.reset()
+    def _fresh_history(self) -> tuple[Heatmap, Tracker]:
+        """An empty heat map and tracker whose frame counts cover the config's time at `fps`."""
+        timed = self.config.at_rate(self.fps)
+        # Region boxes come from heat averaged over the recent frames: centred that far back.
+        return Heatmap(timed.heat), Tracker(timed.track, lag=(timed.heat.recent - 1) / 2)
+
+    def reset(self, fps: float | None = None) -> None:
+        """Forget heat and tracks; with `fps`, frames now come at that rate (the history keeps
+        covering the same time)."""
+        if fps is not None:
+            self.fps = fps
+        self.heatmap, self.tracker = self._fresh_history()
         self.frame_index = 0
 
     def view(
