@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from app.assembly import build_stages
 from app.drivers import process_video
-from app.evaluate import evaluate, load_labels_document
+from app.evaluate import FrameLabels, evaluate, load_labels_document
 from app.record import read_record
 from app.sinks import VideoSink
 from app.sources import Frame, probe_video, read_frames
@@ -42,17 +42,28 @@ FAITHFUL = "medium"
 @dataclass(frozen=True)
 class Framing:
     """Crop `crop` (x0, y0, x1, y1 of the source; None: all), pad `pad` black pixels (left, top,
-    right, bottom), then resize to `size` (None: as it is)."""
+    right, bottom), then resize to `size` (None: as it is); `rate` frames out per frame in, at
+    `rate` times the frame rate (2: each frame twice, as a camera twice as fast sees a scene
+    moving half as far a frame; 0.5: every other frame)."""
 
     name: str
     crop: Box | None = None
     pad: Box = (0, 0, 0, 0)
     size: tuple[int, int] | None = None
+    rate: float = 1.0
 
     @property
     def unchanged(self) -> bool:
-        """Whether the picture stays as it is (no crop, pad or resize)."""
-        return self.crop is None and not any(self.pad) and self.size is None
+        """Whether the clip stays as it is (no crop, pad, resize or other frame rate)."""
+        return self.crop is None and not any(self.pad) and self.size is None and self.rate == 1
+
+    def source_frame(self, frame: int) -> int:
+        """The index of the source frame that the re-framed clip shows as its `frame`."""
+        return int(np.floor(frame / self.rate + 1e-9))
+
+    def frame_count(self, source_frames: int) -> int:
+        """How many frames the re-framed copy of a clip of `source_frames` has."""
+        return int(np.floor(source_frames * self.rate + 1e-9))
 
     def padded_size(self, source: tuple[int, int]) -> tuple[int, int]:
         """(width, height) after the crop and the padding, before the resize."""
@@ -76,7 +87,8 @@ class Framing:
 def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     """The framings of issue #15 for a `source`-sized clip: as it is, horizon 10 % of the height
     higher (crop the top) and lower (pad the top, crop the bottom), a narrower field of view (the
-    middle 80 % enlarged back), a 4:3 crop, black side bars, and two other sizes."""
+    middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes, and half and twice
+    the frame rate."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)
@@ -90,6 +102,8 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("side bars", crop=(side, 0, w - side, h), pad=(side, 0, side, 0)),
         Framing("960x540", size=(round(w * 0.75), round(h * 0.75))),
         Framing("1920x1080", size=(round(w * 1.5), round(h * 1.5))),
+        Framing("half frame rate", rate=0.5),
+        Framing("twice the frame rate", rate=2.0),
     )
 
 
@@ -164,10 +178,25 @@ def write_reframed(
     info = probe_video(video)
     undistort = build_undistorter(calibration, info.size) if calibration else None
     size = framing.output_size(info.size)
-    with VideoSink(output, size, info.fps, preset=preset) as sink:
-        for frame in read_frames(video, info):
-            sink.write(reframe_image(undistort(frame) if undistort else frame, framing))
+    shown = 0  # frames written so far
+    with VideoSink(output, size, info.fps * framing.rate, preset=preset) as sink:
+        for index, frame in enumerate(read_frames(video, info)):
+            if framing.source_frame(shown) != index:
+                continue  # dropped at a lower frame rate
+            picture = reframe_image(undistort(frame) if undistort else frame, framing)
+            while framing.source_frame(shown) == index:
+                sink.write(picture)
+                shown += 1
     return size
+
+
+def retime_labels(
+    labels: Mapping[int, FrameLabels], framing: Framing, source_frames: int
+) -> dict[int, FrameLabels]:
+    """Per-frame labels (of `load_labels`) of the re-framed copy's frames: each shows the labels
+    of the source frame it shows."""
+    frames = (framing.source_frame(j) for j in range(framing.frame_count(source_frames)))
+    return {j: labels[i] for j, i in enumerate(frames) if i in labels}
 
 
 def framing_scores(
@@ -181,16 +210,17 @@ def framing_scores(
 ) -> dict[str, Any]:
     """Scores of roadview (without calibration, as on an unknown camera) on the re-framed clip
     (encoded with the x264 `preset`) against the labels moved the same way."""
-    source = probe_video(video).size
+    info = probe_video(video)
     clip = folder / f"{video.stem}.mp4"
     write_reframed(video, framing, clip, calibration, preset)
-    document = reframe_labels(json.loads(labels.read_text()), framing, source)
+    document = reframe_labels(json.loads(labels.read_text()), framing, info.size)
     record = folder / f"{video.stem}.jsonl"
     lanes, vehicles = build_stages(classifier=classifier)
     process_video(clip, None, None, lanes, vehicles, record=record, vehicles_in_worker=False)
-    truth = load_labels_document(document)
+    truth = retime_labels(load_labels_document(document), framing, info.n_frames)
     frames = list(read_record(record))
-    return {**evaluate(truth, frames), "frames": frames}
+    # The warm-up is the labels' 10 frames of the clip as it is, whatever the frame rate.
+    return {**evaluate(truth, frames, warmup=round(10 * framing.rate)), "frames": frames}
 
 
 def distance_ratios(
@@ -208,7 +238,8 @@ def distance_ratios(
     by_frame = {int(r["frame"]): r for r in reference}
     ratios: list[float] = []
     for record in frames:
-        seen = list(by_frame.get(int(record["frame"]), {}).get("vehicles", []))
+        shown = framing.source_frame(int(record["frame"]))
+        seen = list(by_frame.get(shown, {}).get("vehicles", []))
         framed = [v for v in record.get("vehicles", []) if v.get("distance_m")]
         if not seen or not framed:
             continue
@@ -218,6 +249,21 @@ def distance_ratios(
         for i, j in enumerate(overlap.argmax(axis=1)):
             if overlap[i, j] >= min_iou and seen[j].get("distance_m"):
                 ratios.append(framed[i]["distance_m"] / seen[j]["distance_m"])
+    return np.asarray(ratios, np.float64)
+
+
+def speed_ratios(
+    reference: Sequence[Mapping[str, Any]], frames: Sequence[Mapping[str, Any]], framing: Framing
+) -> NDArray[np.float64]:
+    """Per frame, the speed in the re-framed clip's record `frames` over the speed in the
+    `reference` record of the clip as it is at the source frame it shows: 1 where the road's
+    scale and the frame rate are read right."""
+    speeds = {int(r["frame"]): r.get("speed_kmh") for r in reference}
+    ratios = []
+    for record in frames:
+        seen = speeds.get(framing.source_frame(int(record["frame"])))
+        if seen and record.get("speed_kmh"):
+            ratios.append(record["speed_kmh"] / seen)
     return np.asarray(ratios, np.float64)
 
 
@@ -254,7 +300,8 @@ def framing_table(
     """Pooled scores per framing over `clips` ((video, labels) pairs of one size): the table
     that shows whether roadview holds on footage framed unlike the clips it was tuned on. With
     "as is" first, each other framing also gets the median ratio of its vehicles' distances to
-    the same vehicles' as they are. Copies are encoded with the x264 `preset`."""
+    the same vehicles' as they are, and of its speed to the speed at the same moment as it is.
+    Copies are encoded with the x264 `preset`."""
     source = probe_video(clips[0][0]).size
     table: dict[str, dict[str, float]] = {}
     plain: list[Sequence[Mapping[str, Any]]] = []
@@ -268,14 +315,13 @@ def framing_table(
         if framing.unchanged:
             plain = [s["frames"] for s in scores]
         elif plain:
-            ratios = np.concatenate(
-                [
-                    distance_ratios(reference, s["frames"], framing, source)
-                    for reference, s in zip(plain, scores, strict=True)
-                ]
+            pairs = list(zip(plain, scores, strict=True))
+            distances = np.concatenate(
+                [distance_ratios(ref, s["frames"], framing, source) for ref, s in pairs]
             )
-            # How far the distances moved with the framing (1 = not at all): the median ratio.
-            table[framing.name]["distance_ratio"] = (
-                float(np.median(ratios)) if len(ratios) else float("nan")
-            )
+            speeds = np.concatenate([speed_ratios(ref, s["frames"], framing) for ref, s in pairs])
+            # How far the distances and the speed moved with the framing (1 = not at all): the
+            # median ratios.
+            for key, ratios in (("distance_ratio", distances), ("speed_ratio", speeds)):
+                table[framing.name][key] = float(np.median(ratios)) if len(ratios) else float("nan")
     return table

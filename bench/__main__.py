@@ -339,6 +339,7 @@ def main() -> None:
             f"  {name:24s} precision {row['precision']:.3f}  recall {row['recall']:.3f}  "
             f"mean IoU {row['mean_iou']:.3f}  lane within 20 px {row['lane_within_20px']:.3f}"
             + (f"  distances x{row['distance_ratio']:.3f}" if "distance_ratio" in row else "")
+            + (f"  speed x{row['speed_ratio']:.3f}" if "speed_ratio" in row else "")
         )
     report["patch_features_ms"] = patch_feature_ms(args.data)
     print(f"features of one 64x64 patch: {report['patch_features_ms']:.3f} ms")

@@ -9,14 +9,19 @@ from typing import Any
 import numpy as np
 import pytest
 
+from app.evaluate import FrameLabels, LabelledVehicle
 from app.reframe import (
     Framing,
     distance_ratios,
     framing_table,
     reframe_image,
     reframe_labels,
+    retime_labels,
     standard_framings,
+    write_reframed,
 )
+from app.sinks import VideoSink
+from app.sources import probe_video, read_frames
 from camera_cal import default_calibration_path, load_calibration
 
 # The issue's aim, pooled over the three clips (see the README's table).
@@ -24,7 +29,7 @@ PRECISION = 0.95
 RECALL_DROP = 0.05
 MEAN_IOU = 0.75
 LANE_WITHIN = 0.99
-DISTANCE_DRIFT = 0.05  # median distance of the same vehicles, re-framed over as it is
+DISTANCE_DRIFT = 0.05  # median distance of the same vehicles (and speed), re-framed over as it is
 
 
 def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
@@ -85,9 +90,9 @@ def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
 @pytest.mark.slow
 def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
     """The labelled clips re-framed (horizon 10 % up and down, a narrower view, 4:3, black side
-    bars, 960x540, 1920x1080) and run without calibration, as footage of an unknown camera:
-    pooled over the three clips, the vehicles, their distances and the lane stay close to the
-    clips as they are."""
+    bars, 960x540, 1920x1080, half and twice the frame rate) and run without calibration, as
+    footage of an unknown camera: pooled over the three clips, the vehicles, their distances,
+    the speed and the lane stay close to the clips as they are."""
     clips = [
         (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
         for c in ("test_video", "project_cut_1", "project_cut_2")
@@ -95,9 +100,11 @@ def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
     table = framing_table(clips, load_calibration(default_calibration_path()))
     plain = table.pop("as is")
     for name, row in table.items():
-        # The same lens cropped or padded: each vehicle is as far as in the clip as it is.
-        if name in ("horizon up", "horizon down", "4:3 crop", "side bars"):
+        # The same lens cropped, padded, resized or sampled at another rate: each vehicle is as
+        # far, and the car as fast, as in the clip as it is (a narrower view is another lens).
+        if name != "narrower view":
             assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
+            assert abs(row["speed_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
         assert row["precision"] >= PRECISION, (name, row)
         assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
         assert row["mean_iou"] >= MEAN_IOU, (name, row)
@@ -118,3 +125,30 @@ def test_distance_ratios_pair_the_same_vehicle_across_framings() -> None:
     ]
     ratios = distance_ratios(reference, frames, framing, (1280, 720))
     np.testing.assert_allclose(ratios, [1.1])
+
+
+@pytest.mark.parametrize(("rate", "shown"), [(0.5, [0, 2, 4, 6, 8]), (2.0, [0, 0, 1, 1, 2, 2])])
+def test_another_frame_rate_drops_or_repeats_frames_with_their_labels(
+    tmp_path: Path, rate: float, shown: list[int]
+) -> None:
+    """Half the frame rate keeps every other frame, twice the rate shows each frame twice; the
+    copy's rate says so, and each copied frame carries the labels of the frame it shows."""
+    source = tmp_path / "counting.mp4"
+    with VideoSink(source, (64, 48), 25.0, preset="medium") as sink:
+        for k in range(10):
+            sink.write(np.full((48, 64, 3), 20 * k + 10, np.uint8))  # the frame's index as grey
+    framing = Framing("rate", rate=rate)
+    copy = tmp_path / "copy.mp4"
+    write_reframed(source, framing, copy, None)
+    info = probe_video(copy)
+    assert info.fps == pytest.approx(25.0 * rate)
+    grey = [float(frame.mean()) for frame in read_frames(copy, info)]
+    assert len(grey) == framing.frame_count(10) == int(10 * rate)
+    np.testing.assert_allclose(grey[: len(shown)], [20 * k + 10 for k in shown], atol=3)
+    labels = {
+        k: FrameLabels((LabelledVehicle(k, (k, 0.0, k + 10.0, 10.0), False),), {})
+        for k in range(10)
+    }
+    moved = retime_labels(labels, framing, 10)
+    assert sorted(moved) == list(range(len(grey)))
+    assert [moved[j].vehicles[0].id for j in range(len(shown))] == shown
