@@ -61,6 +61,10 @@ class LaneConfig:
     # turns the car by 2-5 degrees, at 8 it would cross a lane in 26 m; the lines a car crosses
     # at a junction (zebra stripes, kerbs of a side road) run off at 10-20 degrees.
     max_heading_deg: float = 8.0
+    # ... nor one the camera is outside of (|offset| over the width): that is a neighbouring
+    # lane, a shoulder, or the lane left behind in a lane change; the lines are searched afresh
+    # near the car.
+    max_offset_share: float = 0.5
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24
 

@@ -247,7 +247,9 @@ class LaneFinder:
 
     def _estimate(self, view: BirdsEye) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
-        (too narrow or wide, not parallel, too sharp a bend): no lane rather than a wrong one."""
+        (too narrow or wide, not parallel, too sharp a bend) or not ours (the camera outside it:
+        the lines' history is then dropped, so the next frame searches near the car): no lane
+        rather than a wrong one."""
         cfg = self.config
         bw, bh = view.size
         left, right = self.left.smoothed, self.right.smoothed
@@ -297,4 +299,11 @@ class LaneFinder:
         centre_px = float(view.to_birdseye(np.array([[middle, bottom]]))[0, 0])
         offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
+        if abs(offset) > cfg.max_offset_share * width:
+            self.left.reset()
+            self.right.reset()
+            return (
+                None,
+                f"the camera is outside it ({offset:+.2f} m off the centre of {width:.2f} m)",
+            )
         return LaneEstimate(polylines[0], polylines[1], radius, offset, left, right, width), None
