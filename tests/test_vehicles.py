@@ -509,6 +509,7 @@ def test_a_car_is_shown_and_dropped_after_the_same_time_at_any_frame_rate(
     half_frame = 0.5 / fps + 1e-9
     assert abs(frames_to_show / fps - at_25.track.confirm_frames / 25) <= half_frame
     assert abs(frames_shown_unseen / fps - at_25.track.show_missed / 25) <= half_frame
-    assert abs(detector.heatmap.frames.maxlen / fps - at_25.heat.history / 25) <= half_frame
+    kept = detector.heatmap.frames.maxlen
+    assert kept is not None and abs(kept / fps - at_25.heat.history / 25) <= half_frame
     detector.reset()  # a new clip at the same rate
     assert detector.heatmap.frames.maxlen == round(at_25.heat.history * fps / 25)
