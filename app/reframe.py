@@ -107,6 +107,15 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     )
 
 
+def upright_framing(source: tuple[int, int]) -> Framing:
+    """A phone held upright (a rotation-tagged video, decoded portrait) on a `source`-sized
+    landscape clip: the same lens turned a quarter turn sees the middle columns, as many as the
+    picture is tall, with as much again above and below (black here: no picture is there)."""
+    w, h = source
+    side = (w - h) // 2
+    return Framing("phone held upright", crop=(side, 0, side + h, h), pad=(0, side, 0, side))
+
+
 def reframe_image(frame: Frame, framing: Framing) -> Frame:
     """The re-framed picture."""
     h, w = frame.shape[:2]

@@ -18,6 +18,7 @@ from app.reframe import (
     reframe_labels,
     retime_labels,
     standard_framings,
+    upright_framing,
     write_reframed,
 )
 from app.sinks import VideoSink
@@ -40,7 +41,11 @@ def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
     }
 
 
-@pytest.mark.parametrize("framing", standard_framings((1280, 720)), ids=lambda f: f.name)
+@pytest.mark.parametrize(
+    "framing",
+    [*standard_framings((1280, 720)), upright_framing((1280, 720))],
+    ids=lambda f: f.name,
+)
 def test_labels_move_with_the_picture(framing: Framing) -> None:
     """A white box and a white lane dot drawn where the labels say are found, after re-framing
     the picture, where the re-framed labels say (within a pixel and a half)."""
