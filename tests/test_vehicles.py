@@ -121,14 +121,18 @@ def _small() -> Scorer:
     return Scorer.of(load_model(model), load_model(verifier))
 
 
-@pytest.mark.parametrize(("size", "least", "gain"), [(22, 12, 8), (28, 12, 6)])
+@pytest.mark.parametrize(
+    ("rows", "size", "least", "gain"),
+    [(720, 22, 12, 8), (720, 28, 12, 6), (540, 16, 10, 8), (480, 15, 10, 8)],
+)
 def test_cars_3_to_4_percent_tall_are_found_by_the_small_model(
-    model: VehicleModel, data_dir: Path, size: int, least: int, gain: int
+    model: VehicleModel, data_dir: Path, rows: int, size: int, least: int, gain: int
 ) -> None:
-    """Twenty cars of the training set shrunk to 22 and 28 px (3.1 and 3.9 % of 720 rows) and
-    pasted where a car that size meets the road: the 32 px model's 24 px windows find most, the
-    64 px model's bands alone hardly any. (The model knows these cars: this tests the search,
-    its band, heat, part rule and smallest box; the clips measure the classifier.)"""
+    """Twenty cars of the training set shrunk to 3-4 % of the height (22 and 28 px at 720 rows,
+    16 at 540, 15 at 480) and pasted where a car that size meets the road: the 32 px model's
+    windows of 24 px at 720 rows find most, the 64 px model's bands alone hardly any. (The model
+    knows these cars: this tests the search, its band, heat, part rule and smallest box; the
+    clips measure the classifier.)"""
     with zipfile.ZipFile(data_dir / "vehicles.zip") as archive:
         names = sorted(n for n in archive.namelist() if n.endswith(".png"))
         cars = [
@@ -136,12 +140,15 @@ def test_cars_3_to_4_percent_tall_are_found_by_the_small_model(
             for n in names[:: len(names) // 20][:20]
         ]
     road = _rgb(data_dir / "test_images" / "straight_lines1.jpg")
+    if rows != 720:
+        shape = (round(rows * 16 / 9), rows)
+        road = np.ascontiguousarray(cv2.resize(road, shape, interpolation=cv2.INTER_AREA))
     still = DetectorConfig().for_still()
     verifier = load_model(default_verifier_path())
     found = {"with": 0, "without": 0}
     for car in cars:
         frame = road.copy()
-        x0, y1 = 560, 421 + round(1.2 * size)
+        x0, y1 = round(560 * rows / 720), round(421 * rows / 720) + round(1.2 * size)
         frame[y1 - size : y1, x0 : x0 + size] = cv2.resize(
             car, (size, size), interpolation=cv2.INTER_AREA
         )
@@ -154,14 +161,14 @@ def test_cars_3_to_4_percent_tall_are_found_by_the_small_model(
     assert found["with"] >= found["without"] + gain, found
 
 
-def test_the_small_band_is_searched_only_where_its_windows_have_20_pixels(
+def test_the_small_band_is_searched_only_where_its_windows_have_16_pixels(
     model: VehicleModel, data_dir: Path
 ) -> None:
-    """24 px windows at 720 rows are 12 px at 360: too few pixels for 8 px cells (such windows
-    boxed dark road at night), so that band is not searched there."""
+    """24 px windows at 720 rows are 16 px at 480 and 12 px at 360: too few pixels for 8 px
+    cells (such windows boxed dark road at night), so that band is not searched there."""
     frame = _rgb(data_dir / "test_images" / "test1.jpg")
     detector = VehicleDetector(model, small=_small())
-    for size, searched in (((1280, 720), True), ((640, 360), False)):
+    for size, searched in (((1280, 720), True), ((854, 480), True), ((640, 360), False)):
         scaled = np.ascontiguousarray(cv2.resize(frame, size, interpolation=cv2.INTER_AREA))
         hits = detector.search(scaled, view=detector.view(size))
         assert any(hit.band.patch == 32 for hit in hits) == searched

@@ -38,13 +38,13 @@ def _default_bands() -> tuple[Band, ...]:
         Band(window=96 / 720, top=388 / 720, bottom=548 / 720, left=-0.04, right=1.04),
         Band(window=128 / 720, top=384 / 720, bottom=592 / 720, left=-0.05, right=1.05),
         Band(window=192 / 720, top=380 / 720, bottom=668 / 720, left=-0.08, right=1.08),
-        # Cars 3-4 % of the height, far ahead or oncoming, where a 24 px window still has 20 px.
+        # Cars 3-4 % of the height, far ahead or oncoming, where a 24 px window still has 16 px.
         Band(
             window=24 / 720,
             top=408 / 720,
             bottom=452 / 720,
             right=0.75,
-            min_window_px=20.0,
+            min_window_px=16.0,
             part_ratio=2.0,
             patch=32,
         ),

@@ -140,7 +140,8 @@ def search_band(
     not fit in the live picture or its windows would be smaller than its `min_window_px`."""
     cfg = weights.config
     x0, y0, x1, y1, scale = band_geometry(band, view, cfg.patch_size, reference_horizon)
-    if y1 - y0 < scale * cfg.patch_size * 0.99 or scale * cfg.patch_size < band.min_window_px:
+    window = scale * cfg.patch_size
+    if y1 - y0 < window * 0.99 or window < band.min_window_px * 0.99:
         return None
     # A band may reach past the live picture's sides so cars entering it are covered: pad by
     # mirroring the picture there. A car cut by the edge and mirrored looks like a whole car (cars
