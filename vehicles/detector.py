@@ -107,7 +107,6 @@ class VehicleDetector:
         small: Scorer | None = None,
     ) -> None:
         self.model = model
-        self.verifier = verifier
         self.config = config if config is not None else DetectorConfig()
         # The scorer of each band's patch size (`small`: the smallest windows' model, if any).
         self.scorers = {model.config.patch_size: Scorer.of(model, verifier)}
