@@ -79,10 +79,14 @@ class RoadMotion:
         if previous is not None and previous.shape == near.shape:
             if float(cv2.norm(near, previous, cv2.NORM_L1)) < self.repeat_level * near.size:
                 self._frames += 1  # a repeated frame: the road has not been seen to move
-                return trimmed_mean(self.recent, 0.2) if self.recent else None
+                return self.advance
             shift = road_shift(previous, near, self.min_response)
             if shift is not None:
                 self.recent.extend([shift * ym_per_px / self._frames] * self._frames)
-        self._previous = near
-        self._frames = 1
+        self._previous, self._frames = near, 1
+        return self.advance
+
+    @property
+    def advance(self) -> float | None:
+        """Metres a frame, smoothed over the recent measurements; None before the first."""
         return trimmed_mean(self.recent, 0.2) if self.recent else None
