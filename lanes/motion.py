@@ -36,6 +36,16 @@ def road_shift(
     return float(dy) if response >= min_response else None
 
 
+def road_texture(grey: NDArray[np.float32], block: int = 8) -> float:
+    """The median over `block`-pixel squares of their grey-level spread: how much surface the
+    road shows, paint aside (an unlit road at night, or one flattened by compression: none)."""
+    rows, cols = (grey.shape[0] // block) * block, (grey.shape[1] // block) * block
+    if rows == 0 or cols == 0:
+        return 0.0
+    squares = grey[:rows, :cols].reshape(rows // block, block, cols // block, block)
+    return float(np.median(squares.std(axis=(1, 3))))
+
+
 def trimmed_mean(values: Iterable[float], cut: float) -> float:
     """Mean of the values left after dropping the `cut` share at each end (as
     scipy.stats.trim_mean; numpy alone keeps scipy off the frame path)."""
@@ -52,14 +62,21 @@ class RoadMotion:
     A frame whose near road differs from the previous one by less than `repeat_level` grey levels
     on average is a repeat (video converted from a variable frame rate repeats frames; a moving
     road changes by several levels): it is not measured, and the next shift is spread over the
-    frames since the last new one.
+    frames since the last new one. A road whose texture (`road_texture`) is under `min_texture`
+    grey levels does not show whether it moves (solid lines on black asphalt look the same at
+    any speed): it is not measured either, and the oldest measurement ages out each such frame.
     """
 
     def __init__(
-        self, smoothing: int = 15, min_response: float = 0.2, repeat_level: float = 0.25
+        self,
+        smoothing: int = 15,
+        min_response: float = 0.2,
+        repeat_level: float = 0.25,
+        min_texture: float = 0.3,
     ) -> None:
         self.min_response = min_response
         self.repeat_level = repeat_level
+        self.min_texture = min_texture
         self.recent: deque[float] = deque(maxlen=smoothing)
         self._previous: NDArray[np.float32] | None = None
         self._frames = 1  # frames from the previous new view to this one
@@ -76,6 +93,11 @@ class RoadMotion:
         grey = cv2.cvtColor(birdseye_rgb, cv2.COLOR_RGB2GRAY)
         near = np.asarray(grey[-dft_rows(round(grey.shape[0] * NEAR_PART)) :], np.float32)
         previous = self._previous
+        if road_texture(near) < self.min_texture:
+            if self.recent:
+                self.recent.popleft()
+            self._previous, self._frames = near, 1
+            return self.advance
         if previous is not None and previous.shape == near.shape:
             if float(cv2.norm(near, previous, cv2.NORM_L1)) < self.repeat_level * near.size:
                 self._frames += 1  # a repeated frame: the road has not been seen to move

@@ -87,6 +87,27 @@ def test_road_motion_spreads_a_shift_over_repeated_frames() -> None:
     assert all(a is not None and abs(a - step / 2 * 0.125) < 0.02 for a in advances[2:])
 
 
+def test_road_motion_reads_no_speed_off_a_road_without_texture() -> None:
+    """An unlit road at night is black but for its solid lines, which look the same at any speed
+    (the night clip read 0-2 km/h): such a view is not measured, and the measurements from
+    before age out one a frame until the speed is unknown."""
+    rng = np.random.default_rng(0)
+    road = cv2.GaussianBlur((rng.random((900, 512)) * 255).astype(np.uint8), (5, 5), 0)
+    motion = RoadMotion(smoothing=5)
+    for k in range(6):
+        view = road[300 - k * 7 : 300 - k * 7 + 216]
+        assert (motion.update(np.dstack([view] * 3), 0.125) is None) == (k == 0)
+    dark = np.zeros((216, 512), np.uint8)
+    cv2.line(dark, (100, 215), (160, 0), 255, 6)  # two solid lines, slanted as in a bend
+    cv2.line(dark, (400, 215), (460, 0), 200, 6)
+    advances = []
+    for _ in range(6):
+        noise = rng.integers(0, 2, dark.shape, dtype=np.uint8) * (rng.random(dark.shape) < 0.01)
+        advances.append(motion.update(np.dstack([dark + noise] * 3), 0.125))
+    assert all(abs(a - 7 * 0.125) < 0.02 for a in advances[:4] if a is not None)
+    assert advances[3] is not None and advances[4] is None and advances[5] is None
+
+
 def _dash_centres(painted: np.ndarray, min_len: int, max_hole: int) -> list[float]:
     """Rows of the centres of the whole dashes along a line's paint profile (top to bottom):
     runs of paint at least `min_len` rows long once holes up to `max_hole` rows are closed (a
