@@ -22,6 +22,7 @@ from app.stages import FrameStage
 from app.workers import StageWorker
 from camera_cal import (
     Calibration,
+    GroundScale,
     SceneGeometry,
     SceneTracker,
     Undistorter,
@@ -68,9 +69,12 @@ def _scene_warp(
     live: tuple[int, int, int, int],
     scale_height: float,
     vanishing_x: float | None,
+    ground_scale: float,
 ) -> BirdsEye:
     """The default lane config's warp for a scene placement (built once per placement)."""
-    return birdseye_for(size, LaneConfig(), horizon_y, live, scale_height, vanishing_x)
+    return birdseye_for(
+        size, LaneConfig(), horizon_y, live, scale_height, vanishing_x, ground_scale
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,12 +153,23 @@ class Pipeline:
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
+        lanes = self.lanes.config if self.lanes is not None else LaneConfig()
         self._scene = SceneTracker(
             size,
             self._geometry.horizon_y,
             self.horizon_y,
             fixed_scale=lens,
             min_estimates=horizon_estimates(fps),
+            # Lane widths over 10 s, believed after 1 s of them (counts at 25 fps for a still),
+            # moved when they are ones the lane finder does not believe.
+            ground=GroundScale(
+                round(fps or 25),
+                round(10 * (fps or 25)),
+                (
+                    lanes.min_lane_width_m / lanes.lane_width_m,
+                    lanes.max_lane_width_m / lanes.lane_width_m,
+                ),
+            ),
         )
         self._facts = FactsTracker(fps)
         self._events.reset()
@@ -222,6 +237,7 @@ class Pipeline:
             t0 = time.perf_counter()
             lane = self.lanes.process(undistorted, **placement)
             timings["lanes"] = (time.perf_counter() - t0) * 1000
+            self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
         return _Started(undistorted, scene, placement, lane, timings)
 
     def _finish(self, started: _Started) -> FrameOutput:
@@ -250,6 +266,7 @@ class Pipeline:
                 started.placement["live"],
                 started.placement["scale_height"],
                 started.placement["vanishing_x"],
+                started.placement["ground_scale"],
             )
         )
         if (

@@ -10,7 +10,7 @@ from camera_cal.calibration import (
     load_calibration,
     save_calibration,
 )
-from camera_cal.scene import SceneGeometry, SceneTracker, horizon_estimates
+from camera_cal.scene import GroundScale, SceneGeometry, SceneTracker, horizon_estimates
 from camera_cal.undistort import (
     CalibrationMismatch,
     Undistorter,
@@ -23,6 +23,7 @@ __all__ = [
     "Calibration",
     "CalibrationError",
     "CalibrationMismatch",
+    "GroundScale",
     "SceneGeometry",
     "SceneTracker",
     "Undistorter",

@@ -42,6 +42,9 @@ class SceneGeometry:
     # Burnt-in captions and logos, glare fixed on the windscreen and parts of one's own car (a
     # mirror, a pillar) inside the live box.
     overlays: tuple[Box, ...] = ()
+    # A lane's width (and a car's) in pixels at a row below the horizon, against the tuned
+    # camera's: under 1 for a camera mounted higher (a lorry's), over 1 for a lower one.
+    ground_scale: float = 1.0
 
 
 def scale_height(live_size: tuple[int, int]) -> float:
@@ -173,6 +176,43 @@ def horizon_estimates(fps: float, count: int = 5, frame_rate: float = 25.0, leas
     return max(least, min(count, round(count * fps / frame_rate)))
 
 
+class GroundScale:
+    """History for the ground scale from the last `window` lane-width samples (each a lane's
+    width against the tuned camera's at the same rows, and whether the lane finder believed that
+    lane), once `least` are in. The road does not tell a higher camera from narrower lanes, so
+    the scale moves only when the tuned one fails: the median is one no lane has at the current
+    scale, outside `plausible` (the lane finder's 2.6-5.6 m over the tuned 3.7 m), and fewer
+    than `believed` of the samples' lanes were believed. It then moves to the median, so the
+    lanes read as the tuned road's."""
+
+    def __init__(
+        self,
+        least: int = 25,
+        window: int = 250,
+        plausible: tuple[float, float] = (0.7, 1.5),
+        believed: float = 0.5,
+    ) -> None:
+        self.least = least
+        self.plausible = plausible
+        self.believed = believed
+        self._samples: deque[tuple[float, bool]] = deque(maxlen=window)
+        self.value = 1.0
+
+    def add(self, sample: float | None, believed: bool = False) -> float:
+        """Take in one frame's sample (None: no lane measured) and whether its lane was believed;
+        the scale as of it."""
+        if sample is not None and sample > 0:
+            self._samples.append((sample, believed))
+            if len(self._samples) >= self.least:
+                widths, trusted = np.array(self._samples).T
+                median = float(np.median(widths))
+                low, high = self.plausible
+                implausible = not low <= median / self.value <= high
+                if implausible and trusted.mean() < self.believed:
+                    self.value = round(median, 3)
+        return self.value
+
+
 class SceneTracker:
     """History for the scene geometry: the brightest value seen per row and column (for the
     bars), each row's change between frames `motion_every` apart (for a bonnet), the edges of
@@ -186,6 +226,8 @@ class SceneTracker:
     and the vanishing point's column in steps of `settle_x` of the live width (a bend ahead
     moves it by a few per cent; a camera turned sideways by more).
     `fixed_scale` is the scale height of a calibrated lens; without it the live box gives it.
+    The ground scale is learned from the lane stage's width samples (`observe_lane_width`;
+    `ground` sets how).
     """
 
     def __init__(
@@ -203,8 +245,10 @@ class SceneTracker:
         bonnet_every: int = 10,
         settle_x: float = 0.03,
         overlay_every: int = 5,
+        ground: GroundScale | None = None,
     ) -> None:
         self.size = size
+        self.ground = ground if ground is not None else GroundScale()
         self.fixed_scale = fixed_scale
         self.default_horizon = default_horizon
         self.fixed_horizon = fixed_horizon
@@ -305,7 +349,7 @@ class SceneTracker:
             horizon, estimated = self.default_horizon, False
         bonnet = self._bonnet if live[3] == self._bonnet else None
         self._current = SceneGeometry(
-            self.size, horizon, live, estimated, bonnet, vanishing_x, overlays
+            self.size, horizon, live, estimated, bonnet, vanishing_x, overlays, self.ground.value
         )
         tolerance = self.settle * self.size[1]
         placed_horizon, placed_live, _ = self._placed
@@ -323,12 +367,18 @@ class SceneTracker:
             self._placed_x = vanishing_x
         return self._current
 
+    def observe_lane_width(self, sample: float | None, believed: bool = False) -> None:
+        """Take in the lane stage's width sample of the last frame (None: none measured) and
+        whether the lane finder believed that lane."""
+        self.ground.add(sample, believed)
+
     @property
     def placement(self) -> dict[str, Any]:
-        """The horizon, vanishing point's column, live box and scale height as the stages place
-        their work by (their `process` keywords): they follow the estimate in steps (`settle`,
-        `settle_x`), so its wobble neither restarts the lanes' history nor moves the vehicle
-        bands; the column is None (the live centre) until it is that far off the centre."""
+        """The horizon, vanishing point's column, live box, scale height and ground scale as the
+        stages place their work by (their `process` keywords): they follow the estimate in steps
+        (`settle`, `settle_x`, the ground scale's `step`), so its wobble neither restarts the
+        lanes' history nor moves the vehicle bands; the column is None (the live centre) until
+        it is that far off the centre."""
         horizon, live, (x0, y0, x1, y1) = self._placed
         return {
             "horizon_y": horizon,
@@ -339,6 +389,7 @@ class SceneTracker:
             "scale_height": scale_height((x1 - x0, y1 - y0))
             if self.fixed_scale is None
             else self.fixed_scale,
+            "ground_scale": self.ground.value,
         }
 
     def _shrink(self, grey: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -65,6 +65,12 @@ class LaneConfig:
     # lane, a shoulder, or the lane left behind in a lane change; the lines are searched afresh
     # near the car.
     max_offset_share: float = 0.5
+    # A width sample for the ground scale needs the lines near parallel (widths within this
+    # share: a horizon a few rows off, as in the first seconds, tilts them),
+    # and counts as two lanes where paint runs along the middle in this share of the rows (a
+    # dashed line paints 25-40 %).
+    sample_parallel: float = 0.35
+    middle_line_rows: float = 0.2
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24
 

@@ -22,12 +22,14 @@ from lanes.search import (
     fit_lane,
     fit_line,
     histogram_base,
+    paint_between,
     prior_search,
     window_search,
 )
 from lanes.threshold import lane_mask
 
 Boxes = tuple[tuple[int, int, int, int], ...]  # x0, y0, x1, y1 in the frame
+MIDDLE_SHARES = np.linspace(0.3, 0.7, 17)  # where between two lines a middle line is looked for
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +63,10 @@ class LaneResult:
     debug: LaneDebug | None = None
     status: tuple[str, ...] = field(default_factory=tuple)
     advance_m: float | None = None  # how far the road moved towards the camera since last frame
+    # The lane's width this frame (its two lines fitted and parallel, whether believed or not)
+    # against the tuned camera's at the same rows: what the scene learns the ground scale from.
+    width_sample: float | None = None
+    width_believed: bool = False  # both lines of that sample passed the checks this frame
 
 
 class LaneFinder:
@@ -96,11 +102,12 @@ class LaneFinder:
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
         vanishing_x: float | None = None,
+        ground_scale: float = 1.0,
     ) -> BirdsEye:
         """The bird's-eye warp for this frame size and scene (the config's horizon, the whole
-        frame and its height when not given; the live centre's column for the vanishing point),
-        kept while they stay the same (the app passes a scene that moves in steps): a new warp
-        starts the lines' history afresh."""
+        frame and its height when not given; the live centre's column for the vanishing point;
+        the tuned camera's ground scale), kept while they stay the same (the app passes a scene
+        that moves in steps): a new warp starts the lines' history afresh."""
         current = self._view
         if (
             current is not None
@@ -109,10 +116,11 @@ class LaneFinder:
             and live in (None, current.live)
             and scale_height in (None, current.scale_height)
             and vanishing_x == current.vanishing_x
+            and ground_scale == current.ground_scale
         ):
             return current
         self._view = birdseye_for(
-            frame_size, self.config, horizon_y, live, scale_height, vanishing_x
+            frame_size, self.config, horizon_y, live, scale_height, vanishing_x, ground_scale
         )
         if current is not None:
             self.reset()
@@ -131,15 +139,22 @@ class LaneFinder:
         scale_height: float | None = None,
         vanishing_x: float | None = None,
         overlays: Boxes = (),
+        ground_scale: float = 1.0,
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
-        from the scene's `horizon_y`, `live` box, `scale_height` and `vanishing_x` when given).
+        from the scene's `horizon_y`, `live` box, `scale_height`, `vanishing_x` and
+        `ground_scale` when given).
         Paint is read through burnt-in `overlays`: a half-transparent caption leaves the paint
         under it visible, and the paint mask's opening along the road drops its letters (hiding
         the captions' boxes lost the night clip's lane in 3 % of its frames)."""
         cfg = self.config
         view = self.view(
-            (frame.shape[1], frame.shape[0]), horizon_y, live, scale_height, vanishing_x
+            (frame.shape[1], frame.shape[0]),
+            horizon_y,
+            live,
+            scale_height,
+            vanishing_x,
+            ground_scale,
         )
         bw, bh = view.size
         birdseye = view.warp(frame)
@@ -159,12 +174,38 @@ class LaneFinder:
             )
         else:
             fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
+        sample = self._width_sample(fits, paint.mask, view)
         status = self._check_and_update(fits, pixels, view)
+        believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
         lane, doubt = self._estimate(view)
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
-        return LaneResult(lane, debug, status, advance)
+        return LaneResult(lane, debug, status, advance, sample, believed)
+
+    def _width_sample(
+        self, fits: list[Fit | None], mask: NDArray[np.uint8], view: BirdsEye
+    ) -> float | None:
+        """This frame's lane width against the tuned camera's (see `LaneResult.width_sample`):
+        the two lines' distance at the nearest row over the lane's columns in the view, times
+        the view's ground scale; half of it when a line runs midway between them (two lanes).
+        None unless both lines were fitted and run parallel (within `sample_parallel`)."""
+        cfg = self.config
+        left, right = fits
+        if left is None or right is None:
+            return None
+        bw, bh = view.size
+        widths = lane_widths(left, right, np.array([0.0, bh / 2, float(bh)]))
+        if widths.min() <= 0 or widths.max() > (1 + cfg.sample_parallel) * widths.min():
+            return None
+        sample = float(widths[-1] / ((cfg.dst_right_x - cfg.dst_left_x) * bw))
+        half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
+        share, coverage = paint_between(mask, left, right, MIDDLE_SHARES, half_width)
+        if coverage >= cfg.middle_line_rows:
+            if not 0.35 <= share <= 0.65:
+                return None  # a line well off the middle: which part is a lane is unclear
+            sample /= 2
+        return sample * view.ground_scale
 
     def _prior(self, rows: int) -> LanePrior | None:
         """Heading and near width of the smoothed lane, if both lines have history."""

@@ -25,6 +25,7 @@ class BirdsEye:
     live: tuple[int, int, int, int]  # the live box the trapezoid was placed in
     scale_height: float  # the 16:9 height the tuned trapezoid was sized for
     vanishing_x: float | None = None  # the column the sides meet in (None: the live centre's)
+    ground_scale: float = 1.0  # a lane's width in pixels at a row, over the tuned camera's
 
     def warp(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The bird's-eye view of a frame."""
@@ -75,6 +76,7 @@ def birdseye_for(
     live: tuple[int, int, int, int] | None = None,
     scale_height: float | None = None,
     vanishing_x: float | None = None,
+    ground_scale: float = 1.0,
 ) -> BirdsEye:
     """The warp for frames of `frame_size`: the config's trapezoid, moved to the scene.
 
@@ -90,6 +92,11 @@ def birdseye_for(
     twice as long on a road twice as stretched gives the same picture): `scale_height` is the
     height of the 16:9 picture of the tuned lens at this picture's scale (the live height when
     not given); the tuned trapezoid and the bird's-eye image are sized for it.
+
+    `ground_scale` is how wide a lane is at a row (below the horizon) against the tuned camera:
+    a camera twice as high sees it half as wide (0.5), and each row twice as far. The trapezoid
+    narrows by it about the vanishing point, so lanes keep their bird's-eye columns, and covers
+    that much more road.
     """
     w, h = frame_size
     lx0, ly0, lx1, ly1 = live or (0, 0, w, h)
@@ -103,7 +110,7 @@ def birdseye_for(
     # (A horizon given near the bottom still leaves a fifth of the tuned trapezoid's height.)
     scale = max((bottom - horizon) / (config.src_bottom_y * ref_h - apex[1]), 0.2)
     centre = (lx0 + lx1) / 2 + apex[0] - ref_w / 2
-    src = np.array([centre, horizon]) + scale * (reference - apex)
+    src = np.array([centre, horizon]) + scale * (reference - apex) * np.array([ground_scale, 1.0])
     if vanishing_x is not None and bottom > horizon:
         src[:, 0] += (vanishing_x - centre) * (bottom - src[:, 1]) / (bottom - horizon)
     sized = min(ref_h, config.max_warp_frame_height)
@@ -122,7 +129,7 @@ def birdseye_for(
     lane_px = (config.dst_right_x - config.dst_left_x) * bw
     # A road point at row v is K / (v - horizon) ahead: rows `scale` times further below the
     # horizon are `scale` times nearer, so the trapezoid covers that much less road.
-    length = config.warp_length_m / scale
+    length = config.warp_length_m / scale / ground_scale
     return BirdsEye(
         frame_size=(w, h),
         size=(bw, bh),
@@ -134,4 +141,5 @@ def birdseye_for(
         live=(lx0, ly0, lx1, ly1),
         scale_height=ref_h,
         vanishing_x=vanishing_x,
+        ground_scale=ground_scale,
     )

@@ -60,6 +60,29 @@ def histogram_base(mask: NDArray[np.uint8], hint: float, spread: float) -> float
     return float(np.argmax(weighted)) if weighted.max() > 0 else hint
 
 
+def paint_between(
+    mask: NDArray[np.uint8],
+    left: Fit,
+    right: Fit,
+    shares: NDArray[np.float64],
+    half_width: int,
+) -> tuple[float, float]:
+    """The curve between two lines (at one of `shares` of the way from `left` to `right`) that
+    has paint within `half_width` pixels in the most rows, and that share of rows: a line inside
+    a lane means the two lines bound two lanes."""
+    rows = np.arange(mask.shape[0], dtype=np.float64)
+    xl, xr = evaluate_fit(left, rows), evaluate_fit(right, rows)
+    centres = xl[None, :] + shares[:, None] * (xr - xl)[None, :]  # (shares, rows)
+    columns = np.rint(centres)[..., None] + np.arange(-half_width, half_width + 1)
+    inside = (columns >= 0) & (columns < mask.shape[1])
+    painted = np.zeros(columns.shape, bool)
+    index = np.broadcast_to(rows.astype(np.intp)[None, :, None], columns.shape)
+    painted[inside] = mask[index[inside], columns[inside].astype(np.intp)] > 0
+    coverage = painted.any(axis=2).mean(axis=1)
+    best = int(np.argmax(coverage))
+    return float(shares[best]), float(coverage[best])
+
+
 def window_search(
     paint: Paint, base_x: float, windows: int, margin: int, min_pixels: int
 ) -> LinePixels:

@@ -11,6 +11,7 @@ import pytest
 
 from app.sources import probe_video, read_frames
 from camera_cal.scene import (
+    GroundScale,
     SceneTracker,
     bonnet_row,
     live_box,
@@ -145,6 +146,26 @@ def test_the_stages_placement_follows_the_scene_in_steps() -> None:
     for _ in range(6):
         tracker.update(_road(size, (500.0, 290.0), bars=80))
     assert abs(tracker.placement["horizon_y"] - 290) < 4
+
+
+def test_the_ground_scale_moves_only_where_the_tuned_one_fails() -> None:
+    """Nothing before `least` samples; then the median, but only when lanes read outside the
+    plausible widths at the current scale and the lane finder believed few of them (narrow
+    lanes and a higher camera look alike: 2.8 m lanes of the tuned camera, or a road the tuned
+    scale already finds its lanes on, stay as they are). Frames without a sample (None)
+    neither count nor move it."""
+    higher = [0.625 + 0.01 * (k % 3 - 1) for k in range(60)]  # a camera 1.6 times higher
+    scale = GroundScale(least=20, window=40, plausible=(0.7, 1.5), believed=0.5)
+    assert {scale.add(v) for v in higher[:19]} == {1.0}
+    assert scale.add(None) == 1.0
+    assert scale.add(higher[19]) == 0.625
+    assert {scale.add(v * 1.3, True) for v in higher} == {0.625}  # lanes 30 % wider: plausible
+    narrow = GroundScale(least=20, window=40, plausible=(0.7, 1.5), believed=0.5)
+    assert {narrow.add(v * 1.2) for v in higher} == {1.0}  # 2.8 m lanes of the tuned camera
+    found = GroundScale(least=20, window=40, plausible=(0.7, 1.5), believed=0.5)
+    assert {found.add(v, k % 3 > 0) for k, v in enumerate(higher)} == {1.0}  # 2/3 believed
+    lower = GroundScale(least=20, window=40, plausible=(0.7, 1.5), believed=0.5)
+    assert [lower.add(v * 2.6) for v in higher][-1] == pytest.approx(1.625, abs=0.01)
 
 
 @pytest.mark.parametrize(

@@ -203,11 +203,13 @@ class VehicleDetector:
         scale_height: float | None = None,
         vanishing_x: float | None = None,
         overlays: tuple[tuple[int, int, int, int], ...] = (),
+        ground_scale: float = 1.0,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given;
-        `vanishing_x` does not move them; windows over `overlays`, captions or parts of the
-        car, do not heat)."""
+        `vanishing_x` and `ground_scale` do not move them (cars a higher camera sees smaller at
+        a row are left to the bands' spread of sizes: no labelled footage of one to tune on);
+        windows over `overlays`, captions or parts of the car, do not heat)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height)
