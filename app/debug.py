@@ -53,8 +53,8 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
 def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     """The scene geometry on the frame: the live box (green; its bottom is labelled when a
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
-    --horizon), the road's vanishing point on it (a circle, once estimated) and the boxes of
-    burnt-in captions (red)."""
+    --horizon) with the ground scale once it moved from 1, the road's vanishing point on it (a
+    circle, once estimated) and the boxes of burnt-in captions (red)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -62,6 +62,8 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     color = (40, 120, 255) if scene.estimated else (160, 160, 160)
     cv2.line(picture, (x0, y), (x1 - 1, y), color, 2, cv2.LINE_AA)
     label = "horizon (estimated)" if scene.estimated else "horizon (default)"
+    if scene.ground_scale != 1.0:
+        label += f", ground scale {scene.ground_scale:.2f}"
     cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.vanishing_x is not None:
         cv2.circle(picture, (round(scene.vanishing_x), y), 9, color, 2, cv2.LINE_AA)

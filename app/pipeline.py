@@ -14,6 +14,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from app.errors import FrameSizeChanged
 from app.events import Event, EventDetector, FrameSignals
 from app.facts import FactsTracker, FrameFacts, RoadGeometry
@@ -87,6 +90,7 @@ class _Started:
     lane: LaneResult | None
     timings: dict[str, float]
     held: bool = False  # the stages waited for the horizon: they did not see this frame
+    index: int = 0  # frames started before it since `prepare`
 
 
 class Pipeline:
@@ -122,6 +126,9 @@ class Pipeline:
         self._frame = 0  # index of the next frame to finish
         self._started = 0  # frames started since `prepare`
         self._wait = 0  # frames the stages may wait for the horizon
+        # The vehicles of the last frames finished, by start index: the road's motion of frame k
+        # is read around those of frame k - 2 (the newest a worker one frame ahead has done).
+        self._vehicle_boxes: deque[tuple[int, NDArray[np.float64]]] = deque(maxlen=3)
 
     def __enter__(self) -> Pipeline:
         return self
@@ -174,6 +181,7 @@ class Pipeline:
         self._facts = FactsTracker(fps)
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0
+        self._vehicle_boxes.clear()
         unknown = self.calibration is None and self.horizon_y is None
         self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
         frame_bytes = size[0] * size[1] * 3
@@ -225,20 +233,22 @@ class Pipeline:
         scene = self._scene.update(undistorted)
         timings["scene"] = (time.perf_counter() - t0) * 1000
         placement = self._scene.placement
-        held = not scene.estimated and self._started < self._wait
+        index = self._started
+        held = not scene.estimated and index < self._wait
         self._started += 1
         if held:
             waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
-            return _Started(undistorted, scene, placement, waiting, timings, held=True)
+            return _Started(undistorted, scene, placement, waiting, timings, True, index)
         if self._worker is not None:
             self._worker.submit(undistorted, **placement)
         lane = None
         if self.lanes is not None:
             t0 = time.perf_counter()
-            lane = self.lanes.process(undistorted, **placement)
+            around = next((b for k, b in self._vehicle_boxes if k == index - 2), None)
+            lane = self.lanes.process(undistorted, **placement, vehicles=around)
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
-        return _Started(undistorted, scene, placement, lane, timings)
+        return _Started(undistorted, scene, placement, lane, timings, False, index)
 
     def _finish(self, started: _Started) -> FrameOutput:
         """Add the vehicles (from the worker, or run here) to the frame's result."""
@@ -254,6 +264,8 @@ class Pipeline:
             t0 = time.perf_counter()
             vehicles = self.vehicles.process(undistorted, **started.placement)
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
+        if vehicles is not None:
+            self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
         facts = None
         # Metres follow the warp placed from the scene: the lane stage's, or without it the
         # default lane config's for the same placement.

@@ -26,11 +26,19 @@ def dft_rows(rows: int) -> int:
 
 
 def road_shift(
-    previous: NDArray[np.float32], current: NDArray[np.float32], min_response: float = 0.2
+    previous: NDArray[np.float32],
+    current: NDArray[np.float32],
+    min_response: float = 0.2,
+    hidden: NDArray[np.bool_] | None = None,
 ) -> float | None:
     """Rows the road moved towards the camera from `previous` to `current` (same-size grey
-    bird's-eye images), or None when the correlation peak is too weak to trust."""
+    bird's-eye images), or None when the correlation peak is too weak to trust. `hidden`
+    pixels (vehicles: one beside us at our speed stays put in the view and reads as no motion)
+    get no weight, with a soft edge so the mask adds no pattern of its own."""
     window = cv2.createHanningWindow((current.shape[1], current.shape[0]), cv2.CV_32F)
+    if hidden is not None and hidden.any():
+        grown = cv2.dilate(hidden.astype(np.uint8), np.ones((5, 5), np.uint8))
+        window = window * (1.0 - cv2.blur(grown.astype(np.float32), (9, 9)))
     # Copies: with a window, OpenCV multiplies its inputs by it in place.
     (_, dy), response = cv2.phaseCorrelate(previous.copy(), current.copy(), window)
     return float(dy) if response >= min_response else None
@@ -87,11 +95,17 @@ class RoadMotion:
         self._previous = None
         self._frames = 1
 
-    def update(self, birdseye_rgb: NDArray[np.uint8], ym_per_px: float) -> float | None:
+    def update(
+        self,
+        birdseye_rgb: NDArray[np.uint8],
+        ym_per_px: float,
+        hidden: NDArray[np.bool_] | None = None,
+    ) -> float | None:
         """Metres the car advanced since the previous frame (smoothed over the recent measurements),
-        or None until a measurement is trusted."""
+        or None until a measurement is trusted; `hidden` (the view's size) marks vehicles."""
         grey = cv2.cvtColor(birdseye_rgb, cv2.COLOR_RGB2GRAY)
-        near = np.asarray(grey[-dft_rows(round(grey.shape[0] * NEAR_PART)) :], np.float32)
+        rows = dft_rows(round(grey.shape[0] * NEAR_PART))
+        near = np.asarray(grey[-rows:], np.float32)
         previous = self._previous
         if road_texture(near) < self.min_texture:
             if self.recent:
@@ -102,7 +116,9 @@ class RoadMotion:
             if float(cv2.norm(near, previous, cv2.NORM_L1)) < self.repeat_level * near.size:
                 self._frames += 1  # a repeated frame: the road has not been seen to move
                 return self.advance
-            shift = road_shift(previous, near, self.min_response)
+            shift = road_shift(
+                previous, near, self.min_response, None if hidden is None else hidden[-rows:]
+            )
             if shift is not None:
                 self.recent.extend([shift * ym_per_px / self._frames] * self._frames)
         self._previous, self._frames = near, 1

@@ -37,6 +37,22 @@ class BirdsEye:
         """How many bird's-eye pixels cover `area_m2` of road (at least 1)."""
         return max(1, round(area_m2 / (self.xm_per_px * self.ym_per_px)))
 
+    def covered(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_] | None:
+        """The bird's-eye pixels under any of the frame's `boxes` (n, 4: x0, y0, x1, y1), their
+        parts below the horizon (above it the ground plane has no points); None without."""
+        if len(boxes) == 0:
+            return None
+        bw, bh = self.size
+        mask = np.zeros((bh, bw), np.uint8)
+        top = self.horizon_y + 0.02 * self.frame_size[1]
+        for x0, y0, x1, y1 in np.asarray(boxes, np.float64):
+            if y1 <= top:
+                continue
+            y0 = max(y0, top)
+            corners = self.to_birdseye(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+            cv2.fillPoly(mask, [np.round(corners).astype(np.int32)], 1)
+        return mask.astype(bool)
+
     def to_frame(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
         """Bird's-eye (x, y) points mapped to the undistorted frame."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)

@@ -87,6 +87,27 @@ def test_road_motion_spreads_a_shift_over_repeated_frames() -> None:
     assert all(a is not None and abs(a - step / 2 * 0.125) < 0.02 for a in advances[2:])
 
 
+def test_road_motion_reads_the_road_around_a_vehicle_at_our_speed() -> None:
+    """A vehicle beside us at our speed stays put in the view while the road streams past it
+    (as it does for a rolled camera, whose view leans into the next lane): its sharp edges pull
+    the correlation to no motion. Read around its box, the road's own shift comes back."""
+    rng = np.random.default_rng(0)
+    road = cv2.GaussianBlur((rng.random((900, 512)) * 255).astype(np.uint8), (5, 5), 0) // 3
+    car = np.full((120, 200), 20, np.uint8)
+    car[20:100, 20:180] = 250  # a bright body on dark tyres and shadow: strong still edges
+    hidden = np.zeros((216, 512), bool)
+    hidden[60:180, 280:480] = True
+    plain, around = RoadMotion(), RoadMotion()
+    step = 6
+    for k in range(8):
+        view = road[300 - k * step : 300 - k * step + 216].copy()
+        view[60:180, 280:480] = car
+        rgb = np.dstack([view] * 3)
+        fooled, advance = plain.update(rgb, 0.125), around.update(rgb, 0.125, hidden)
+    assert fooled is not None and fooled < 0.5 * step * 0.125
+    assert advance is not None and abs(advance - step * 0.125) < 0.02
+
+
 def test_road_motion_reads_no_speed_off_a_road_without_texture() -> None:
     """An unlit road at night is black but for its solid lines, which look the same at any speed
     (the night clip read 0-2 km/h): such a view is not measured, and the measurements from

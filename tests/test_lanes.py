@@ -343,3 +343,18 @@ def test_a_camera_mounted_higher_gets_its_lanes_and_speed(data_dir: Path) -> Non
                     errors.append(np.inf if found is None else abs(found - x))
     # (With the tuned scale 43 % of these points were within 20 px.)
     assert len(errors) > 300 and np.mean(np.asarray(errors) <= 20) >= 0.95
+
+
+def test_covered_maps_a_vehicle_box_onto_the_birdseye_road() -> None:
+    """A box standing on the road covers the bird's-eye pixels of its footprint up to where its
+    top meets the view (nothing above the horizon): the road's motion is read around them."""
+    view = birdseye_for((1280, 720), LaneConfig())
+    assert view.covered(np.zeros((0, 4))) is None
+    middle = view.to_frame(np.array([[view.size[0] / 2, view.size[1] * 0.8]]))[0]
+    box = np.array([[middle[0] - 60, middle[1] - 80, middle[0] + 60, middle[1]]])
+    mask = view.covered(box)
+    assert mask is not None and mask.shape == (view.size[1], view.size[0])
+    ys, xs = np.nonzero(mask)
+    assert abs(xs.mean() - view.size[0] / 2) < 10 and ys.max() >= view.size[1] * 0.8 - 2
+    sky = view.covered(np.array([[500.0, 100.0, 700.0, view.horizon_y - 5]]))
+    assert sky is not None and not sky.any()

@@ -12,6 +12,7 @@ import pytest
 from app.sources import probe_video, read_frames
 from camera_cal.scene import (
     GroundScale,
+    SceneGeometry,
     SceneTracker,
     bonnet_row,
     live_box,
@@ -255,3 +256,17 @@ def test_debug_of_an_unknown_camera_runs_long_enough_to_place_its_stages(
     green = (scene[:, :, 1] > 200) & (scene[:, :, 0] < 60) & (scene[:, :, 2] < 60)
     rows = np.flatnonzero(green[:, 100:750].mean(axis=1) > 0.9)
     assert any(400 <= r <= 426 for r in rows)
+
+
+def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
+    """The ground scale is drawn with the horizon once it moved from the tuned camera's 1."""
+    from dataclasses import replace
+
+    from app.debug import scene_picture
+
+    frame = np.zeros((360, 640, 3), np.uint8)
+    scene = SceneGeometry((640, 360), 150.0, (0, 0, 640, 360), estimated=True)
+    tuned = scene_picture(frame, scene)
+    higher = scene_picture(frame, replace(scene, ground_scale=0.67))
+    label = (slice(100, 150), slice(0, 640))  # the text above the horizon row
+    assert (higher[label] > 0).sum() > 1.3 * (tuned[label] > 0).sum()
