@@ -376,9 +376,9 @@ class SceneTracker:
     def placement(self) -> dict[str, Any]:
         """The horizon, vanishing point's column, live box, scale height and ground scale as the
         stages place their work by (their `process` keywords): they follow the estimate in steps
-        (`settle`, `settle_x`, the ground scale's `step`), so its wobble neither restarts the
-        lanes' history nor moves the vehicle bands; the column is None (the live centre) until
-        it is that far off the centre."""
+        (`settle`, `settle_x`; the ground scale moves only when the lanes need it), so its
+        wobble neither restarts the lanes' history nor moves the vehicle bands; the column is
+        None (the live centre) until it is that far off the centre."""
         horizon, live, (x0, y0, x1, y1) = self._placed
         return {
             "horizon_y": horizon,

@@ -47,11 +47,14 @@ def road_shift(
 def road_texture(grey: NDArray[np.float32], block: int = 8) -> float:
     """The median over `block`-pixel squares of their grey-level spread: how much surface the
     road shows, paint aside (an unlit road at night, or one flattened by compression: none)."""
-    rows, cols = (grey.shape[0] // block) * block, (grey.shape[1] // block) * block
+    rows, cols = grey.shape[0] // block, grey.shape[1] // block
     if rows == 0 or cols == 0:
         return 0.0
-    squares = grey[:rows, :cols].reshape(rows // block, block, cols // block, block)
-    return float(np.median(squares.std(axis=(1, 3))))
+    part = np.asarray(grey[: rows * block, : cols * block], np.float32)
+    # Each square's mean and mean square (area averages), so its variance in one pass.
+    mean = cv2.resize(part, (cols, rows), interpolation=cv2.INTER_AREA)
+    square = cv2.resize(part * part, (cols, rows), interpolation=cv2.INTER_AREA)
+    return float(np.median(np.sqrt(np.maximum(square - mean * mean, 0.0))))
 
 
 def trimmed_mean(values: Iterable[float], cut: float) -> float:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -70,15 +71,16 @@ def paint_between(
     """The curve between two lines (at one of `shares` of the way from `left` to `right`) that
     has paint within `half_width` pixels in the most rows, and that share of rows: a line inside
     a lane means the two lines bound two lanes."""
+    # Paint within `half_width` of a column is paint at that column of the widened mask.
+    wide = cv2.dilate((mask > 0).astype(np.uint8), np.ones((1, 2 * half_width + 1), np.uint8))
     rows = np.arange(mask.shape[0], dtype=np.float64)
     xl, xr = evaluate_fit(left, rows), evaluate_fit(right, rows)
-    centres = xl[None, :] + shares[:, None] * (xr - xl)[None, :]  # (shares, rows)
-    columns = np.rint(centres)[..., None] + np.arange(-half_width, half_width + 1)
+    columns = np.rint(xl[None, :] + shares[:, None] * (xr - xl)[None, :])  # (shares, rows)
     inside = (columns >= 0) & (columns < mask.shape[1])
     painted = np.zeros(columns.shape, bool)
-    index = np.broadcast_to(rows.astype(np.intp)[None, :, None], columns.shape)
-    painted[inside] = mask[index[inside], columns[inside].astype(np.intp)] > 0
-    coverage = painted.any(axis=2).mean(axis=1)
+    index = np.broadcast_to(rows.astype(np.intp)[None, :], columns.shape)
+    painted[inside] = wide[index[inside], columns[inside].astype(np.intp)] > 0
+    coverage = painted.mean(axis=1)
     best = int(np.argmax(coverage))
     return float(shares[best]), float(coverage[best])
 
