@@ -78,6 +78,8 @@ def fixed_part_boxes(
     min_area: float = 0.005,
     min_outline: float = 0.15,
     strip: float = 0.05,
+    known: NDArray[np.bool_] | None = None,
+    keep_ratio: float = 0.75,
 ) -> tuple[Box, ...]:
     """Boxes over the parts of one's own car in the picture (a mirror, a pillar, the dashboard)
     from `change`, each pixel's mean change between samples, and `persistence`, how often it was
@@ -87,7 +89,9 @@ def fixed_part_boxes(
     `min_outline` of its length (a smooth road's patch between moving lane lines has about
     none). Each patch is given as a stack of boxes `strip` of the height tall, so a slanted
     pillar does not hide the road beside it. `inside` (the picture within black bars) is where
-    it looks, and whose sides count (a still black bar is no part of the car)."""
+    it looks, and whose sides count (a still black bar is no part of the car). Pixels of parts
+    found before (`known`) stay still while they change less than `keep_ratio` of the typical
+    pixel: a mirror reflects the moving scene a little, and a part of the car does not leave."""
     ox, oy, ex, ey = inside if inside is not None else (0, 0, change.shape[1], change.shape[0])
     change, persistence = change[oy:ey, ox:ex], persistence[oy:ey, ox:ex]
     h, w = change.shape
@@ -97,7 +101,10 @@ def fixed_part_boxes(
     reference = float(np.median(change[top:]))
     if reference <= 0:
         return ()
-    still = np.asarray(change < still_ratio * reference, np.uint8)
+    still = change < still_ratio * reference
+    if known is not None:
+        still |= known[oy:ey, ox:ex] & (change < keep_ratio * reference)
+    still = np.asarray(still, np.uint8)
     still[:top] = 0
     still = cv2.morphologyEx(still, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(still, connectivity=8)
@@ -131,9 +138,12 @@ class OverlayTracker:
     one sample to the next, over frames sampled while the picture changes (a car standing still
     would keep every edge and pixel in place).
 
-    Boxes are found once `min_samples` samples are in (a few seconds of driving), and again
-    each `every` samples after; `still` is the share of a sample's edges that were edges in the
-    previous sample too above which the sample is skipped (moving: 0.1-0.6).
+    Captions are found once `min_samples` samples are in (a few seconds of driving), and again
+    each `every` samples after; parts of the car, a still patch outlined by steady edges, from
+    `part_samples` on, every `part_every` (a mirror is boxed as a car until found). `still` is
+    the share of a sample's edges that were edges in the previous sample too above which the
+    sample is skipped (moving: 0.1-0.6). A part once found is kept while it stays stiller than
+    the typical pixel, so it does not come and go as its reflections or shade change.
     """
 
     def __init__(
@@ -142,17 +152,28 @@ class OverlayTracker:
         min_samples: int = 24,
         every: int = 10,
         still: float = 0.85,
+        part_samples: int = 12,
+        part_every: int = 5,
     ) -> None:
         self.size = size  # (width, height) of the sampled pictures
         self.min_samples = min_samples
         self.every = every
+        self.part_samples = part_samples
+        self.part_every = part_every
         self.still = still
         self._counts = np.zeros((size[1], size[0]), np.uint16)
         self._previous: NDArray[np.bool_] | None = None
         self._change = np.zeros((size[1], size[0]), np.float32)
         self._last: NDArray[np.uint8] | None = None  # the last sample taken in
         self.samples = 0
-        self.boxes: tuple[Box, ...] = ()
+        self._captions: tuple[Box, ...] = ()
+        self._parts: tuple[Box, ...] = ()
+        self._part_mask = np.zeros((size[1], size[0]), bool)  # where the parts found last are
+
+    @property
+    def boxes(self) -> tuple[Box, ...]:
+        """The captions' and the car's parts' boxes as of the last sample."""
+        return self._captions + self._parts
 
     def update(
         self, grey: NDArray[np.uint8], top: int = 0, inside: Box | None = None
@@ -170,8 +191,30 @@ class OverlayTracker:
                 self._change += cv2.absdiff(grey, self._last)
             self._last = grey
             self.samples += 1
-        if self.samples >= self.min_samples and (self.samples - self.min_samples) % self.every == 0:
-            self.boxes = overlay_boxes(self._counts / self.samples) + fixed_part_boxes(
-                self._change / (self.samples - 1), self._counts / self.samples, top, inside
+        n = self.samples
+        if n >= self.min_samples and (n - self.min_samples) % self.every == 0:
+            self._captions = overlay_boxes(self._counts / n)
+        if n >= self.part_samples and (n - self.part_samples) % self.part_every == 0:
+            self._parts = fixed_part_boxes(
+                self._change / (n - 1), self._counts / n, top, inside, known=self._part_mask
             )
+            self._part_mask[:] = False
+            for x0, y0, x1, y1 in self._parts:
+                self._part_mask[y0:y1, x0:x1] = True
+        return self.boxes
+        if self.samples < np.iinfo(np.uint16).max:
+            self._counts += edges
+            if self._last is not None:
+                self._change += cv2.absdiff(grey, self._last)
+            self._last = grey
+            self.samples += 1
+        if self.samples >= self.min_samples and (self.samples - self.min_samples) % self.every == 0:
+            persistence = self._counts / self.samples
+            parts = fixed_part_boxes(
+                self._change / (self.samples - 1), persistence, top, inside, known=self._parts
+            )
+            self._parts = np.zeros_like(self._parts)
+            for x0, y0, x1, y1 in parts:
+                self._parts[y0:y1, x0:x1] = True
+            self.boxes = overlay_boxes(persistence) + parts
         return self.boxes

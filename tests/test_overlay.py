@@ -120,6 +120,31 @@ def test_a_still_mirror_is_found_and_a_smooth_road_is_not() -> None:
         assert (covered & ~mirror).sum() <= 0.4 * mirror.sum()
 
 
+def test_a_mirror_is_found_within_three_seconds_and_kept_when_it_reflects() -> None:
+    """A part of the car is looked for from 12 samples of every 5th frame (within 65 frames,
+    2.6 s at 25 fps; captions wait for 24); once found, it stays while its glass starts to
+    reflect the moving scene (changing a third as much as the road), which would not make a
+    new part."""
+    size = (320, 240)
+    mirror = _wedge(size, (230, 175), 140, 205)
+    frames = moving_road(size, 200)
+    rng = np.random.default_rng(5)
+    for t, f in enumerate(frames):
+        f[mirror] = (25, 22, 30)
+        if t >= 80:  # the glass now shows something of the scene behind
+            f[mirror] = np.clip(f[mirror] + rng.integers(0, 40, (int(mirror.sum()), 1)), 0, 255)
+    found = SceneTracker(size, default_horizon=120.0, fixed_horizon=120.0)
+    seen = [found.update(f).overlays for f in frames]
+    assert next(i for i, s in enumerate(seen) if s) <= 65
+    covered = np.zeros(mirror.shape, bool)
+    for x0, y0, x1, y1 in seen[-1]:
+        covered[y0:y1, x0:x1] = True
+    assert (covered & mirror).sum() >= 0.9 * mirror.sum()
+    # Seen only from the time it reflects, it is no part of the car.
+    late = SceneTracker(size, default_horizon=120.0, fixed_horizon=120.0)
+    assert [late.update(f).overlays for f in frames[80:]][-1] == ()
+
+
 def test_a_fixed_part_needs_a_steady_outline() -> None:
     """The rule on its own: the same still patch at the side is a part of the car with steady
     edges around it, and road without them; black bars are not looked in."""
@@ -137,6 +162,15 @@ def test_a_fixed_part_needs_a_steady_outline() -> None:
     assert any(b[0] == 0 for b in fixed_part_boxes(change, steady, top=30))
     inside = fixed_part_boxes(change, steady, top=30, inside=(20, 0, 200, 100))
     assert inside == boxes
+    # A patch changing a third as much as the road is no part, unless it was found before.
+    change[40:70, 160:] = 2.0
+    assert fixed_part_boxes(change, steady, top=30, inside=(20, 0, 200, 100)) == ()
+    known = np.zeros(change.shape, bool)
+    known[40:70, 160:] = True
+    kept = fixed_part_boxes(change, steady, top=30, inside=(20, 0, 200, 100), known=known)
+    assert kept == boxes
+    change[40:70, 160:] = 6.0  # as much as the road: gone, found or not
+    assert fixed_part_boxes(change, steady, top=30, inside=(20, 0, 200, 100), known=known) == ()
 
 
 def test_covered_share_of_windows() -> None:
@@ -196,20 +230,26 @@ def test_the_captions_of_wild_clips(wild_dir: Path, clip: str, truth: Box | None
     )
 
 
+def _la_mirror() -> np.ndarray:
+    """The mask of the LA clip's mirror (outlined by eye on frame 130, 854x480)."""
+    mirror = np.zeros((480, 854), np.uint8)
+    cv2.fillPoly(mirror, [np.array([(692, 325), (853, 238), (853, 357), (730, 356)], np.int32)], 1)
+    return mirror
+
+
 def test_the_mirror_in_a_wild_clip_is_found(wild_dir: Path) -> None:
     """The LA clip's dashcam sees a dark mirror in its right corner, where the vehicle model
-    boxed it in every frame (outlined by eye on frame 130, 854x480): found within 6 s, covered,
-    and no box anywhere else (the smooth road, the bonnet's reflections, the sky)."""
+    boxed it in every frame: found within 2.5 s (its lower part), covered from 7 s, and no box
+    anywhere else (the smooth road, the bonnet's reflections, the sky)."""
     video = wild_dir / "la_freeway_minidashcam_2.mp4"
     info = probe_video(video)
-    mirror = np.zeros((info.size[1], info.size[0]), np.uint8)
-    cv2.fillPoly(mirror, [np.array([(692, 325), (853, 238), (853, 357), (730, 356)], np.int32)], 1)
+    mirror = _la_mirror()
     tracker = SceneTracker(info.size, default_horizon=0.55 * info.size[1])
     # Its first 12 s, before the clip cuts to another camera.
     seen = [tracker.update(frame).overlays for frame in read_frames(video, info, 0, 360)]
     first = next(i for i, s in enumerate(seen) if s)
-    assert first <= 6 * info.fps
-    # Its dark lower part first (65 %), the whole of it as more samples come in; for a frame
+    assert first <= 2.5 * info.fps
+    # Its dark lower part first, the whole of it as more samples come in; for a frame
     # before the bonnet is found (4 s), a box on that too.
     for boxes in seen[round(7 * info.fps) :]:
         covered = np.zeros(mirror.shape, bool)
@@ -221,18 +261,17 @@ def test_the_mirror_in_a_wild_clip_is_found(wild_dir: Path) -> None:
 
 @pytest.mark.slow
 def test_no_vehicle_is_boxed_on_the_mirror(wild_dir: Path, tmp_path: Path) -> None:
-    """The LA clip's mirror was boxed as a vehicle in every frame; once found (6 s), it is not
-    (the box of a car there is at most half on it)."""
+    """The LA clip's mirror was boxed as a vehicle in every frame; once found, it is not after
+    6 s (the box of a car there is at most half on it), also once the clip is back from 2 s of
+    another camera at 12 s (their changes there had made the mirror less still than a part of
+    the car, and it was boxed again in 139 of the 408 frames after 6 s)."""
     video = wild_dir / "la_freeway_minidashcam_2.mp4"
-    rows = process_clip(video, tmp_path, "--no-lanes", "--calibration", "none", "--end", "12")
-    corner = (692, 238, 854, 357)  # the mirror's box (outlined above)
+    rows = process_clip(video, tmp_path, "--no-lanes", "--calibration", "none")
+    mirror = _la_mirror() > 0
 
     def on_mirror(box: list[float]) -> bool:
-        x0, y0, x1, y1 = box
-        inside = max(0.0, min(x1, corner[2]) - max(x0, corner[0])) * max(
-            0.0, min(y1, corner[3]) - max(y0, corner[1])
-        )
-        return inside >= 0.5 * (x1 - x0) * (y1 - y0)
+        x0, y0, x1, y1 = (round(v) for v in box)
+        return bool(mirror[y0:y1, x0:x1].sum() >= 0.5 * (x1 - x0) * (y1 - y0))
 
     later = rows[6 * 30 :]
     assert sum(on_mirror(v["box"]) for r in later for v in r["vehicles"]) <= 0.02 * len(later)
