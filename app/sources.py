@@ -46,6 +46,9 @@ class VideoInfo:
     duration: float
     has_audio: bool
     rotation: int = 0  # degrees of the display-matrix tag that decoding applies
+    # The stored pixels' width over their height (an anamorphic 960x720 16:9 video: 4/3);
+    # decoding stretches them square, so `size` is the picture as it is meant to be seen.
+    pixel_aspect: float = 1.0
 
 
 def is_image(path: Path) -> bool:
@@ -71,6 +74,7 @@ _STREAM = re.compile(r"^\s*Stream #0:\d+.*?: (Video|Audio): (.*)$")
 _SIZE = re.compile(r"(?:^|[ ,])(\d{1,5})x(\d{1,5})(?:[ ,]|$)")
 _RATE = re.compile(r"([\d.]+)(k?) (fps|tbr)")
 _ROTATION = re.compile(r"(?:rotation of|rotate\s*:)\s*(-?[\d.]+)")
+_SAR = re.compile(r"\[SAR (\d+):(\d+) DAR")
 _DURATION = re.compile(r"Duration: (\d+):(\d+):([\d.]+)")
 _PACKETS = re.compile(r"frame=\s*(\d+)")
 _LEVEL = re.compile(r"\[(error|fatal)\] (.*)$")
@@ -90,6 +94,7 @@ class ProbeFacts:
     packets: int | None = None
     audio: bool = False
     rotation: int = 0
+    pixel_aspect: float = 1.0
     errors: list[str] = field(default_factory=list)
 
 
@@ -119,6 +124,9 @@ def parse_probe(text: str) -> ProbeFacts:
                     found = _RATE.findall(details)
                     rates = {unit: float(v) * (1000 if k else 1) for v, k, unit in found}
                     facts.fps = rates.get("fps") or rates.get("tbr") or 0.0
+                    sar = _SAR.search(details)
+                    if sar is not None and int(sar.group(1)) > 0 and int(sar.group(2)) > 0:
+                        facts.pixel_aspect = int(sar.group(1)) / int(sar.group(2))
                     in_video = True
             elif in_video and (rotation := _ROTATION.search(line)) is not None:
                 facts.rotation = round(float(rotation.group(1))) % 360
@@ -175,7 +183,7 @@ def probe_video(path: Path) -> VideoInfo:
     duration = n_frames / facts.fps if facts.fps > 0 else 0.0
     if facts.fps <= 0 or min(facts.size) <= 0 or n_frames <= 0:
         raise InputError(f"{path} has no video frames; the file may be truncated or empty")
-    width, height = facts.size
+    width, height = square_size(facts.size, facts.pixel_aspect)
     if facts.rotation in (90, 270):
         width, height = height, width
     return VideoInfo(
@@ -185,7 +193,20 @@ def probe_video(path: Path) -> VideoInfo:
         duration=duration,
         has_audio=facts.audio,
         rotation=facts.rotation,
+        pixel_aspect=facts.pixel_aspect,
     )
+
+
+def square_size(stored: tuple[int, int], pixel_aspect: float) -> tuple[int, int]:
+    """The size of a `stored` picture whose pixels are `pixel_aspect` times as wide as tall,
+    with square pixels: widened (or made taller) to an even size, never shrunk, so no detail is
+    lost and the 4:2:0 output takes it."""
+    width, height = stored
+    if abs(pixel_aspect - 1.0) < 1e-3:
+        return width, height
+    if pixel_aspect > 1:
+        return 2 * round(width * pixel_aspect / 2), height
+    return width, 2 * round(height / pixel_aspect / 2)
 
 
 def read_frames(
@@ -207,6 +228,11 @@ def read_frames(
         "0:v:0",
         "-fps_mode",
         "passthrough",
+    ]
+    if abs(info.pixel_aspect - 1.0) >= 1e-3:
+        # Square pixels, after the rotation ffmpeg applies first: the upright picture's size.
+        command += ["-vf", f"scale={width}:{height}:flags=bicubic,setsar=1"]
+    command += [
         "-f",
         "rawvideo",
         "-pix_fmt",

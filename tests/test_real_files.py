@@ -14,6 +14,7 @@ import jsonschema
 import numpy as np
 import pytest
 
+from app.evaluate import evaluate, load_labels
 from app.sources import ffmpeg_binary, probe_video, read_frames
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
@@ -80,7 +81,42 @@ def made(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str
         )
     files["silent"] = d / "silent.mp4"
     ffmpeg("-i", clip, "-an", "-c:v", "copy", files["silent"])
+    # Anamorphic: the 16:9 picture stored 960x720 in pixels 4/3 as wide as tall (a camera or
+    # an editor that saves bits so), and the same tagged as a phone's upright video.
+    files["anamorphic"] = d / "anamorphic.mp4"
+    ffmpeg("-i", clip, "-an", "-vf", "scale=960:720,setsar=4/3", files["anamorphic"])
+    files["anamorphic_upright"] = d / "anamorphic_upright.mp4"
+    ffmpeg(
+        "-display_rotation:v:0", "90", "-i", files["anamorphic"], "-c", "copy",
+        files["anamorphic_upright"],
+    )  # fmt: skip
     return files
+
+
+def test_anamorphic_video_is_seen_with_square_pixels(
+    made: dict[str, Path], tmp_path: Path, data_dir: Path
+) -> None:
+    """Pixels stored wider than tall are decoded square (rotation applied first): the picture
+    and its size are the clip's own, so the shipped calibration fits it (it was refused as
+    another aspect ratio) and the clip's labels score as on the clip itself."""
+    info = probe_video(made["anamorphic"])
+    assert info.size == (1280, 720) and info.pixel_aspect == pytest.approx(4 / 3)
+    square = next(read_frames(made["anamorphic"], info)).astype(int)
+    plain = next(read_frames(made["silent"], probe_video(made["silent"]))).astype(int)
+    assert np.abs(square - plain).mean() < 4.0
+    upright_info = probe_video(made["anamorphic_upright"])
+    assert upright_info.size == (720, 1280) and upright_info.rotation == 90
+    upright = next(read_frames(made["anamorphic_upright"], upright_info)).astype(int)
+    assert min(np.abs(np.rot90(square, k) - upright).mean() for k in (1, 3)) < 2.0
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli("process", made["anamorphic"], "-o", out, "--json", record)
+    assert result.returncode == 0, result.stderr
+    assert count_frames(out)[0].size == (1280, 720)
+    scores = evaluate(load_labels(data_dir / "labels" / "test_video.json"), read_record(record))
+    vehicles = scores["vehicles"]["iou_0.5"]
+    assert vehicles["precision"] >= 0.95 and vehicles["recall"] >= 0.95
+    assert vehicles["mean_iou"] >= 0.8
+    assert scores["lane"]["share_within_20px"] >= 0.99
 
 
 def test_rotated_video_is_processed_upright(made: dict[str, Path], tmp_path: Path) -> None:
