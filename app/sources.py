@@ -49,6 +49,9 @@ class VideoInfo:
     # The stored pixels' width over their height (an anamorphic 960x720 16:9 video: 4/3);
     # decoding stretches them square, so `size` is the picture as it is meant to be seen.
     pixel_aspect: float = 1.0
+    # The HDR transfer of a phone's HDR video ("smpte2084": PQ, "arib-std-b67": HLG), which
+    # decoding tone-maps to the SDR picture the stages were tuned on; None: SDR.
+    hdr: str | None = None
 
 
 def is_image(path: Path) -> bool:
@@ -75,6 +78,7 @@ _SIZE = re.compile(r"(?:^|[ ,])(\d{1,5})x(\d{1,5})(?:[ ,]|$)")
 _RATE = re.compile(r"([\d.]+)(k?) (fps|tbr)")
 _ROTATION = re.compile(r"(?:rotation of|rotate\s*:)\s*(-?[\d.]+)")
 _SAR = re.compile(r"\[SAR (\d+):(\d+) DAR")
+_HDR = re.compile(r"\b(smpte2084|arib-std-b67)\b")
 _DURATION = re.compile(r"Duration: (\d+):(\d+):([\d.]+)")
 _PACKETS = re.compile(r"frame=\s*(\d+)")
 _LEVEL = re.compile(r"\[(error|fatal)\] (.*)$")
@@ -95,6 +99,7 @@ class ProbeFacts:
     audio: bool = False
     rotation: int = 0
     pixel_aspect: float = 1.0
+    hdr: str | None = None
     errors: list[str] = field(default_factory=list)
 
 
@@ -127,6 +132,8 @@ def parse_probe(text: str) -> ProbeFacts:
                     sar = _SAR.search(details)
                     if sar is not None and int(sar.group(1)) > 0 and int(sar.group(2)) > 0:
                         facts.pixel_aspect = int(sar.group(1)) / int(sar.group(2))
+                    if (hdr := _HDR.search(details)) is not None:
+                        facts.hdr = hdr.group(1)
                     in_video = True
             elif in_video and (rotation := _ROTATION.search(line)) is not None:
                 facts.rotation = round(float(rotation.group(1))) % 360
@@ -194,6 +201,7 @@ def probe_video(path: Path) -> VideoInfo:
         has_audio=facts.audio,
         rotation=facts.rotation,
         pixel_aspect=facts.pixel_aspect,
+        hdr=facts.hdr,
     )
 
 
@@ -207,6 +215,16 @@ def square_size(stored: tuple[int, int], pixel_aspect: float) -> tuple[int, int]
     if pixel_aspect > 1:
         return 2 * round(width * pixel_aspect / 2), height
     return width, 2 * round(height / pixel_aspect / 2)
+
+
+# HDR to SDR BT.709: light made linear with HDR's reference white (203 nits, ITU-R BT.2408) as
+# SDR's white, BT.2020 primaries converted to BT.709 in linear light, brighter light rolled off
+# (Mobius: unchanged below 60 % of white), and the BT.709 curve. Decoded as they are, PQ video
+# reads dim and grey (the test clip's mean 74 against 106 of 255).
+SDR_TONE_MAP = (
+    "zscale=t=linear:npl=203,format=gbrpf32le,zscale=p=bt709,"
+    "tonemap=tonemap=mobius:param=0.6:desat=0,zscale=t=bt709:m=bt709:r=tv,format=gbrp"
+)
 
 
 def read_frames(
@@ -229,9 +247,14 @@ def read_frames(
         "-fps_mode",
         "passthrough",
     ]
+    filters = []
+    if info.hdr is not None:
+        filters.append(SDR_TONE_MAP)
     if abs(info.pixel_aspect - 1.0) >= 1e-3:
         # Square pixels, after the rotation ffmpeg applies first: the upright picture's size.
-        command += ["-vf", f"scale={width}:{height}:flags=bicubic,setsar=1"]
+        filters.append(f"scale={width}:{height}:flags=bicubic,setsar=1")
+    if filters:
+        command += ["-vf", ",".join(filters)]
     command += [
         "-f",
         "rawvideo",
