@@ -142,8 +142,9 @@ class OverlayTracker:
     each `every` samples after; parts of the car, a still patch outlined by steady edges, from
     `part_samples` on, every `part_every` (a mirror is boxed as a car until found). `still` is
     the share of a sample's edges that were edges in the previous sample too above which the
-    sample is skipped (moving: 0.1-0.6). A part once found is kept while it stays stiller than
-    the typical pixel, so it does not come and go as its reflections or shade change.
+    sample is skipped (moving: 0.1-0.6). A part once found is kept while it changes less than
+    three quarters as much as the typical pixel (`fixed_part_boxes`'s `keep_ratio`), so it does
+    not come and go as its reflections or shade change.
     """
 
     def __init__(
@@ -201,20 +202,4 @@ class OverlayTracker:
             self._part_mask[:] = False
             for x0, y0, x1, y1 in self._parts:
                 self._part_mask[y0:y1, x0:x1] = True
-        return self.boxes
-        if self.samples < np.iinfo(np.uint16).max:
-            self._counts += edges
-            if self._last is not None:
-                self._change += cv2.absdiff(grey, self._last)
-            self._last = grey
-            self.samples += 1
-        if self.samples >= self.min_samples and (self.samples - self.min_samples) % self.every == 0:
-            persistence = self._counts / self.samples
-            parts = fixed_part_boxes(
-                self._change / (self.samples - 1), persistence, top, inside, known=self._parts
-            )
-            self._parts = np.zeros_like(self._parts)
-            for x0, y0, x1, y1 in parts:
-                self._parts[y0:y1, x0:x1] = True
-            self.boxes = overlay_boxes(persistence) + parts
         return self.boxes

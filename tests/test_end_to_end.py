@@ -23,10 +23,12 @@ def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[st
     folder = tmp_path_factory.mktemp("clips")
     out = {}
     # The 960x540 clip is longer: without a calibration the stages wait for the horizon first.
+    # Square pixels throughout: scaled alone, 640x480 would keep the 16:9 picture in pixels
+    # 4/3 as wide as tall (ffmpeg sets that), which is decoded back to 16:9.
     for name, size, seconds in (
-        ("small", "640:360", "0.4"),
-        ("wide960", "960:540", "1.2"),
-        ("square", "640:480", "0.4"),
+        ("small", "640:360,setsar=1", "0.4"),
+        ("wide960", "960:540,setsar=1", "1.2"),
+        ("square", "640:480,setsar=1", "0.4"),
     ):
         out[name] = folder / f"{name}.mp4"
         subprocess.run(
