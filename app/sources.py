@@ -205,12 +205,18 @@ def probe_video(path: Path) -> VideoInfo:
     )
 
 
+def square(pixel_aspect: float) -> bool:
+    """Whether pixels this many times as wide as tall are square (a 1279x719 rescale of a
+    1280x720 picture is tagged 0.9994: a pixel's worth over its width, left alone)."""
+    return abs(pixel_aspect - 1.0) < 1e-3
+
+
 def square_size(stored: tuple[int, int], pixel_aspect: float) -> tuple[int, int]:
     """The size of a `stored` picture whose pixels are `pixel_aspect` times as wide as tall,
     with square pixels: widened (or made taller) to an even size, never shrunk, so no detail is
     lost and the 4:2:0 output takes it."""
     width, height = stored
-    if abs(pixel_aspect - 1.0) < 1e-3:
+    if square(pixel_aspect):
         return width, height
     if pixel_aspect > 1:
         return 2 * round(width * pixel_aspect / 2), height
@@ -250,7 +256,7 @@ def read_frames(
     filters = []
     if info.hdr is not None:
         filters.append(SDR_TONE_MAP)
-    if abs(info.pixel_aspect - 1.0) >= 1e-3:
+    if not square(info.pixel_aspect):
         # Square pixels, after the rotation ffmpeg applies first: the upright picture's size.
         filters.append(f"scale={width}:{height}:flags=bicubic,setsar=1")
     if filters:
