@@ -199,6 +199,7 @@ def process_command(
             end,
             events_file=events,
             horizon_y=horizon,
+            log=lambda m: typer.echo(m, err=True),
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(

@@ -20,7 +20,7 @@ from app.progress import Progress
 from app.record import frame_record
 from app.runtime import warm_up_opencv
 from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
-from app.sources import prefetch, probe_video, read_frames, read_image
+from app.sources import decoding_notes, prefetch, probe_video, read_frames, read_image
 from camera_cal import Calibration, fits
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
@@ -77,9 +77,10 @@ def process_video(
     vehicles_in_worker: bool = True,
     events_file: Path | None = None,
     horizon_y: float | None = None,
+    log: Callable[[str], None] = lambda message: None,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
-    only on success.
+    only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square).
 
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
@@ -90,6 +91,8 @@ def process_video(
         info = probe_video(source)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
         check_horizon(horizon_y, info.size)
+        for note in decoding_notes(info):
+            log(f"note: {source.name}: {note}")
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()

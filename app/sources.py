@@ -205,6 +205,20 @@ def probe_video(path: Path) -> VideoInfo:
     )
 
 
+def decoding_notes(info: VideoInfo) -> list[str]:
+    """What decoding changes of the stored picture, in a user's words (nothing for most video)."""
+    notes = []
+    if info.hdr is not None:
+        curve = "PQ" if info.hdr == "smpte2084" else "HLG"
+        notes.append(f"HDR video ({curve}): tone-mapped to SDR")
+    if not square(info.pixel_aspect):
+        notes.append(
+            f"pixels stored {info.pixel_aspect:.3g} times as wide as tall: stretched square, "
+            f"{info.size[0]}x{info.size[1]}"
+        )
+    return notes
+
+
 def square(pixel_aspect: float) -> bool:
     """Whether pixels this many times as wide as tall are square (a 1279x719 rescale of a
     1280x720 picture is tagged 0.9994: a pixel's worth over its width, left alone)."""

@@ -122,6 +122,7 @@ def test_hdr_video_is_tone_mapped_to_the_picture_the_stages_know(
     record = tmp_path / "o.jsonl"
     result = run_cli("process", made["pq"], "-o", tmp_path / "o.mp4", "--json", record)
     assert result.returncode == 0, result.stderr
+    assert "HDR video (PQ): tone-mapped to SDR" in result.stderr
     scores = evaluate(load_labels(data_dir / "labels" / "test_video.json"), read_record(record))
     vehicles = scores["vehicles"]["iou_0.5"]
     assert vehicles["precision"] >= 0.95 and vehicles["recall"] >= 0.95
@@ -147,6 +148,7 @@ def test_anamorphic_video_is_seen_with_square_pixels(
     out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
     result = run_cli("process", made["anamorphic"], "-o", out, "--json", record)
     assert result.returncode == 0, result.stderr
+    assert "1.33 times as wide as tall: stretched square, 1280x720" in result.stderr
     assert count_frames(out)[0].size == (1280, 720)
     scores = evaluate(load_labels(data_dir / "labels" / "test_video.json"), read_record(record))
     vehicles = scores["vehicles"]["iou_0.5"]
