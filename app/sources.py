@@ -36,6 +36,24 @@ def ffmpeg_binary() -> str:
     return str(get_ffmpeg_exe())
 
 
+@functools.cache
+def can_tone_map() -> bool:
+    """Whether the ffmpeg in use has the filters of the HDR tone map (imageio-ffmpeg's builds
+    do; one named by IMAGEIO_FFMPEG_EXE may not)."""
+    try:
+        done = subprocess.run(
+            [ffmpeg_binary(), "-hide_banner", "-filters"],
+            capture_output=True,
+            timeout=60,
+            check=False,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    lines = done.stdout.decode(errors="replace").splitlines()
+    names = {line.split()[1] for line in lines if len(line.split()) > 2}
+    return {"zscale", "tonemap"} <= names
+
+
 @dataclass(frozen=True)
 class VideoInfo:
     """What a video file holds, as ffmpeg decodes it (rotation applied)."""
@@ -210,7 +228,13 @@ def decoding_notes(info: VideoInfo) -> list[str]:
     notes = []
     if info.hdr is not None:
         curve = "PQ" if info.hdr == "smpte2084" else "HLG"
-        notes.append(f"HDR video ({curve}): tone-mapped to SDR")
+        notes.append(
+            f"HDR video ({curve}): tone-mapped to SDR"
+            if can_tone_map()
+            else f"HDR video ({curve}), but this ffmpeg has no zscale and tonemap filters: "
+            "decoded as it is, darker and greyer than meant (unset IMAGEIO_FFMPEG_EXE to use "
+            "imageio-ffmpeg's own)"
+        )
     if not square(info.pixel_aspect):
         notes.append(
             f"pixels stored {info.pixel_aspect:.3g} times as wide as tall: stretched square, "
@@ -268,7 +292,7 @@ def read_frames(
         "passthrough",
     ]
     filters = []
-    if info.hdr is not None:
+    if info.hdr is not None and can_tone_map():
         filters.append(SDR_TONE_MAP)
     if not square(info.pixel_aspect):
         # Square pixels, after the rotation ffmpeg applies first: the upright picture's size.

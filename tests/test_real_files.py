@@ -14,6 +14,7 @@ import jsonschema
 import numpy as np
 import pytest
 
+from app import sources
 from app.evaluate import evaluate, load_labels
 from app.sources import ffmpeg_binary, probe_video, read_frames
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
@@ -128,6 +129,19 @@ def test_hdr_video_is_tone_mapped_to_the_picture_the_stages_know(
     assert vehicles["precision"] >= 0.95 and vehicles["recall"] >= 0.95
     assert vehicles["mean_iou"] >= 0.75
     assert scores["lane"]["share_within_20px"] >= 0.99
+
+
+def test_hdr_video_without_the_tone_map_filters_is_decoded_and_says_so(
+    made: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An ffmpeg without zscale and tonemap (one a user names) still decodes HDR video, as it
+    is: darker than the tone-mapped picture, and the note says why."""
+    info = probe_video(made["pq"])
+    mapped = next(read_frames(made["pq"], info)).astype(float).mean()
+    monkeypatch.setattr(sources, "can_tone_map", lambda: False)
+    plain = next(read_frames(made["pq"], info)).astype(float).mean()
+    assert plain < mapped - 15
+    assert "no zscale and tonemap filters" in " ".join(sources.decoding_notes(info))
 
 
 def test_anamorphic_video_is_seen_with_square_pixels(
