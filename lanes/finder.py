@@ -30,6 +30,7 @@ from lanes.threshold import lane_mask
 
 Boxes = tuple[tuple[int, int, int, int], ...]  # x0, y0, x1, y1 in the frame
 MIDDLE_SHARES = np.linspace(0.3, 0.7, 17)  # where between two lines a middle line is looked for
+MIDDLE = (0.35, 0.65)  # where such a line makes the two lines bound two lanes of a width
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,7 +206,7 @@ class LaneFinder:
         half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
         share, coverage = paint_between(mask, left, right, MIDDLE_SHARES, half_width)
         if coverage >= cfg.middle_line_rows:
-            if not 0.35 <= share <= 0.65:
+            if not MIDDLE[0] <= share <= MIDDLE[1]:
                 return None  # a line well off the middle: which part is a lane is unclear
             sample /= 2
         return sample * view.ground_scale
