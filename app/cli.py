@@ -15,6 +15,7 @@ from app.runtime import tune_process
 from camera_cal import (
     Calibration,
     calibrate,
+    calibrate_frames,
     default_calibration_path,
     load_calibration,
     save_calibration,
@@ -86,21 +87,38 @@ def data_command(
 
 @cli.command("calibrate")
 def calibrate_command(
-    images: Annotated[Path, typer.Option(help="Folder of chessboard photos.")] = Path(
-        "data/camera_cal"
-    ),
+    images: Annotated[
+        Path | None,
+        typer.Option(help="Folder of chessboard photos (default: data/camera_cal)."),
+    ] = None,
+    video: Annotated[
+        Path | None,
+        typer.Option(
+            help="Instead of photos: a video of the chessboard, filmed with the dashcam while "
+            "the board is moved about the picture."
+        ),
+    ] = None,
     board: Annotated[str, typer.Option(help="Inner corners per row x per column.")] = "9x6",
     out: Annotated[Path, typer.Option(help="Calibration JSON to write.")] = Path(
         "camera_cal/dashcam.json"
     ),
 ) -> None:
-    """Calibrate the camera from chessboard photos and save the matrix and distortion as JSON."""
+    """Calibrate the camera from chessboard photos or a video and save the matrix and
+    distortion as JSON."""
     from app.sinks import atomic_output
 
     size = _parse_board(board)
-    calibration = calibrate(list_images(images), board=size)
-    for skipped in calibration.images_skipped:
-        typer.echo(f"skipped {skipped}", err=True)
+    if video is not None and images is not None:
+        raise InputError("give --images or --video, not both")
+    if video is not None:
+        calibration = _calibrate_video(video, size)
+        source = f"{len(calibration.images_used)} distinct views in {video}"
+    else:
+        calibration = calibrate(list_images(images or Path("data/camera_cal")), board=size)
+        for skipped in calibration.images_skipped:
+            typer.echo(f"skipped {skipped}", err=True)
+        total = len(calibration.images_used) + len(calibration.images_skipped)
+        source = f"{len(calibration.images_used)} of {total} images"
     try:
         with atomic_output(out) as tmp:
             save_calibration(calibration, tmp)
@@ -108,11 +126,27 @@ def calibrate_command(
         raise InputError(f"cannot write {out} ({error.strerror}); choose another --out") from None
     m = calibration.camera_matrix
     typer.echo(
-        f"calibrated from {len(calibration.images_used)} of "
-        f"{len(calibration.images_used) + len(calibration.images_skipped)} images: "
+        f"calibrated from {source}: "
         f"RMS reprojection error {calibration.rms:.3f} px, fx {m[0, 0]:.1f}, fy {m[1, 1]:.1f}, "
         f"cx {m[0, 2]:.1f}, cy {m[1, 2]:.1f}; saved {out}"
     )
+
+
+# Frames of a calibration video looked at per second: a board moved by hand changes little
+# in a quarter of a second, and each look costs a few milliseconds (tens where a board is).
+CALIBRATION_LOOKS_PER_S = 4.0
+
+
+def _calibrate_video(video: Path, board: tuple[int, int]) -> Calibration:
+    """Calibrate from the upright frames of a chessboard video, a few per second."""
+    from app.sources import probe_video, read_frames
+
+    info = probe_video(video)
+    step = max(1, round(info.fps / CALIBRATION_LOOKS_PER_S)) if info.fps > 0 else 1
+    frames = (
+        (f"frame {i}", frame) for i, frame in enumerate(read_frames(video, info)) if i % step == 0
+    )
+    return calibrate_frames(frames, board=board)
 
 
 def _calibration(value: str) -> Calibration | None:

@@ -47,7 +47,11 @@ def describe(error: Exception) -> str:
             "make one with 'roadview calibrate' or pass --calibration FILE|none",
         ),
         (ChessboardImagesError, "pass --images DIR with .jpg/.png photos of the chessboard"),
-        (TooFewBoardsError, "check --board (inner corners, e.g. 9x6) or add photos"),
+        (
+            TooFewBoardsError,
+            "check --board (inner corners, e.g. 9x6), or give more and more varied views of "
+            "the board (photos, or a video of it moved about the picture, near and far, tilted)",
+        ),
         (ModelError, "retrain with 'make train' or pass another --model"),
         (DatasetError, "gather the data with 'make data' or pass --data DIR"),
     ]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -92,7 +92,6 @@ def calibrate(
     """Calibrate from chessboard photos; photos without the whole board are skipped and named."""
     if not paths:
         raise ChessboardImagesError("no chessboard images given")
-    object_grid = _board_object_points(board)
     images: list[tuple[str, NDArray[np.uint8] | None]] = [
         (path.name, cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)) for path in paths
     ]
@@ -100,8 +99,7 @@ def calibrate(
     if not sizes:
         raise ChessboardImagesError("none of the chessboard files could be read as an image")
     size = sizes.most_common(1)[0][0]
-    object_points: list[NDArray[np.float32]] = []
-    image_points: list[NDArray[np.float32]] = []
+    views: list[NDArray[np.float32]] = []
     used: list[str] = []
     skipped: list[str] = []
     for name, image in images:
@@ -116,22 +114,92 @@ def calibrate(
         if corners is None:
             skipped.append(f"{name}: whole board not found")
             continue
-        object_points.append(object_grid)
-        image_points.append(corners)
+        views.append(corners)
         used.append(name)
     if len(used) < min_boards:
         raise TooFewBoardsError(
             f"only {len(used)} of {len(paths)} images show the whole {board[0]}x{board[1]} board "
             f"(need {min_boards})"
         )
-    rms, matrix, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
+    return _solve(views, board, size, tuple(used), tuple(skipped))
+
+
+def calibrate_frames(
+    frames: Iterable[tuple[str, NDArray[np.uint8]]],
+    board: tuple[int, int] = (9, 6),
+    min_boards: int = 8,
+    min_shift: float = 0.03,
+    max_views: int = 40,
+) -> Calibration:
+    """Calibrate from named video frames (grey or RGB, one size) of a chessboard moved about the
+    picture. A frame whose corners lie within `min_shift` of the width (on average) of a view
+    already kept adds nothing but weight and is left out; of more than `max_views` distinct views
+    the most different are kept. `images_used` names the frames used, `images_skipped` counts the
+    rest."""
+    views: list[NDArray[np.float32]] = []
+    names: list[str] = []
+    seen = with_board = 0
+    size: tuple[int, int] | None = None
+    for name, frame in frames:
+        grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
+        size = size or (grey.shape[1], grey.shape[0])
+        seen += 1
+        # The quick test (a millisecond or two) spares the full search on frames without a board.
+        if not cv2.checkChessboard(grey, board):
+            continue
+        corners = find_board_corners(grey, board)
+        if corners is None:
+            continue
+        with_board += 1
+        shifts = [np.linalg.norm(corners - v, axis=1).mean() / size[0] for v in views]
+        if min(shifts, default=np.inf) >= min_shift:
+            views.append(corners)
+            names.append(name)
+    if size is None:
+        raise ChessboardImagesError("the video has no frames")
+    if len(views) < min_boards:
+        raise TooFewBoardsError(
+            f"only {len(views)} distinct views of the whole {board[0]}x{board[1]} board in "
+            f"{seen} frames ({with_board} show it; need {min_boards})"
+        )
+    keep = _most_different(np.array([v.ravel() for v in views]), max_views)
+    skipped = (f"{seen - len(keep)} of {seen} frames: no board, or a view already used",)
+    return _solve([views[i] for i in keep], board, size, tuple(names[i] for i in keep), skipped)
+
+
+def _most_different(vectors: NDArray[np.float32], count: int) -> list[int]:
+    """Indices of `count` rows chosen farthest-first (the first row, then each time the row
+    furthest from all chosen), in their original order; all rows if there are no more."""
+    if len(vectors) <= count:
+        return list(range(len(vectors)))
+    chosen = [0]
+    distance = np.linalg.norm(vectors - vectors[0], axis=1)
+    while len(chosen) < count:
+        pick = int(distance.argmax())
+        chosen.append(pick)
+        distance = np.minimum(distance, np.linalg.norm(vectors - vectors[pick], axis=1))
+    return sorted(chosen)
+
+
+def _solve(
+    views: Sequence[NDArray[np.float32]],
+    board: tuple[int, int],
+    size: tuple[int, int],
+    used: tuple[str, ...],
+    skipped: tuple[str, ...],
+) -> Calibration:
+    """The camera matrix and distortion that best map the board's corners onto the views."""
+    object_grid = _board_object_points(board)
+    rms, matrix, dist, _, _ = cv2.calibrateCamera(
+        [object_grid] * len(views), list(views), size, None, None
+    )
     return Calibration(
         camera_matrix=np.asarray(matrix, dtype=np.float64),
         dist_coeffs=np.asarray(dist, dtype=np.float64).ravel(),
         image_size=size,
         rms=float(rms),
-        images_used=tuple(used),
-        images_skipped=tuple(skipped),
+        images_used=used,
+        images_skipped=skipped,
     )
 
 

@@ -74,3 +74,44 @@ def moving_road(
             frame[bonnet:] = (200, 200, 205)
         out.append(frame)
     return out
+
+
+def chessboard_frames(
+    size: tuple[int, int],
+    matrix: NDArray[np.float64],
+    dist: NDArray[np.float64],
+    board: tuple[int, int] = (9, 6),
+    views: int = 16,
+    hold: int = 6,
+    seed: int = 0,
+) -> list[NDArray[np.uint8]]:
+    """RGB frames of a (cols, rows) inner-corner chessboard, as a camera with `matrix` and
+    distortion `dist` sees it in `views` random poses (tilted up to 25 degrees, anywhere in the
+    picture, 14-22 squares away per focal length in widths), each held for `hold` frames."""
+    width, height = size
+    px, margin = 40, 1.0  # texture pixels per square; white margin in squares
+    cols, rows = board
+    shape = (round((rows + 1 + 2 * margin) * px), round((cols + 1 + 2 * margin) * px))
+    ys, xs = np.mgrid[0 : shape[0], 0 : shape[1]] / px - margin - 1  # first inner corner at 0
+    inside = (xs >= -1) & (xs < cols) & (ys >= -1) & (ys < rows)
+    texture = np.where(((np.floor(xs) + np.floor(ys)) % 2 == 0) & inside, 20, 235)
+    to_board = np.array([[1 / px, 0, -margin - 1], [0, 1 / px, -margin - 1], [0, 0, 1]])
+    # Where each pixel of the distorted picture looks in the pinhole picture.
+    grid = np.mgrid[0:height, 0:width][::-1].reshape(2, -1).T.astype(np.float32)
+    pinhole = cv2.undistortPoints(grid.reshape(-1, 1, 2), matrix, dist, P=matrix)
+    maps = pinhole.reshape(height, width, 2).astype(np.float32)
+    rng = np.random.default_rng(seed)
+    centre = np.array([(cols - 1) / 2, (rows - 1) / 2, 0.0])
+    frames: list[NDArray[np.uint8]] = []
+    for _ in range(views):
+        rotation, _ = cv2.Rodrigues(np.deg2rad(rng.uniform(-25, 25, 3) * [1, 1, 0.4]))
+        target = [rng.uniform(0.2, 0.8) * width, rng.uniform(0.25, 0.75) * height, 1.0]
+        distance = rng.uniform(14, 22) * matrix[0, 0] / width
+        shift = distance * np.linalg.solve(matrix, target) - rotation @ centre
+        homography = matrix @ np.column_stack([rotation[:, 0], rotation[:, 1], shift]) @ to_board
+        picture = cv2.warpPerspective(
+            texture.astype(np.uint8), homography, size, flags=cv2.INTER_AREA, borderValue=128
+        )
+        seen = cv2.remap(picture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderValue=128)
+        frames += [np.dstack([seen] * 3)] * hold
+    return frames

@@ -15,12 +15,14 @@ from camera_cal import (
     CalibrationError,
     build_undistorter,
     calibrate,
+    calibrate_frames,
     calibrated_scale_height,
     default_calibration_path,
     load_calibration,
     save_calibration,
 )
-from camera_cal.calibration import list_images
+from camera_cal.calibration import find_board_corners, list_images
+from tests.helpers import assert_one_line_error, chessboard_frames, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -145,3 +147,89 @@ def test_other_aspect_ratio_is_refused() -> None:
 def test_committed_file_is_small_json() -> None:
     document = json.loads(default_calibration_path().read_text())
     assert set(document) >= {"camera_matrix", "dist_coeffs", "image_size", "rms", "images_used"}
+
+
+def _write_video(path: Path, frames: list[np.ndarray], fps: float = 24.0) -> Path:
+    from app.sinks import VideoSink
+
+    height, width = frames[0].shape[:2]
+    with VideoSink(path, (width, height), fps, preset="medium") as sink:
+        for frame in frames:
+            sink.write(np.ascontiguousarray(frame))
+    return path
+
+
+def test_a_wide_lens_is_calibrated_from_a_video_of_the_board(tmp_path: Path) -> None:
+    """A wide-angle dashcam (focal length half the width, strong barrel distortion) films a
+    board held in 16 places for a quarter of a second each: `calibrate --video` recovers the lens
+    within 2 px wherever the board was seen, and one view per place."""
+    size = (1280, 720)
+    matrix = np.array([[640.0, 0, 645], [0, 640.0, 355], [0, 0, 1]])
+    dist = np.array([-0.32, 0.11, 0.0, 0.0, -0.015])
+    frames = chessboard_frames(size, matrix, dist, views=16, hold=6)
+    video = _write_video(tmp_path / "board.mp4", frames)
+    result = run_cli("calibrate", "--video", video, "--out", tmp_path / "wide.json")
+    assert result.returncode == 0, result.stderr
+    assert "distinct views" in result.stdout
+    found = load_calibration(tmp_path / "wide.json")
+    assert found.image_size == size
+    assert 8 <= len(found.images_used) <= 16  # a view held still is used once
+    assert found.rms < 0.5
+    np.testing.assert_allclose(found.camera_matrix[:2, :2], matrix[:2, :2], rtol=0.01, atol=1)
+    np.testing.assert_allclose(found.camera_matrix[:2, 2], matrix[:2, 2], atol=3)
+    # Undistorted positions against the true lens's, where the corners were seen.
+    views = [
+        find_board_corners(frames[int(n.split()[1])][:, :, 0], (9, 6)) for n in found.images_used
+    ]
+    corners = np.vstack([v for v in views if v is not None])
+    hull = cv2.convexHull(corners.astype(np.float32))
+    xs, ys = np.meshgrid(np.arange(0, size[0], 16), np.arange(0, size[1], 16))
+    grid = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float32)
+    seen = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0 for x, y in grid])
+    assert seen.mean() > 0.4
+    points = grid[seen].reshape(-1, 1, 2)
+    truth = cv2.undistortPoints(points, matrix, dist, P=matrix).reshape(-1, 2)
+    for coeffs, within in ((found.dist_coeffs, 2.0), (np.zeros(5), None)):
+        got = cv2.undistortPoints(points, found.camera_matrix, coeffs, P=matrix).reshape(-1, 2)
+        error = np.linalg.norm(got - truth, axis=1)
+        if within is not None:
+            assert np.median(error) < 1.5 and error.max() < within
+        else:  # the lens matters: read as a pinhole, the same points are tens of pixels off
+            assert error.max() > 30
+
+
+def test_the_shared_chessboards_calibrate_alike_from_a_video(
+    dashcam: Calibration, data_dir: Path, tmp_path: Path
+) -> None:
+    """The 20 photos shown for half a second each, as a video: the same photos show the board,
+    each is used once, and the lens comes out as from the photos."""
+    photos = [
+        cv2.cvtColor(cv2.imread(str(p)), cv2.COLOR_BGR2RGB)[:720, :1280]
+        for p in list_images(data_dir / "camera_cal")
+    ]
+    video = _write_video(tmp_path / "photos.mp4", [p for p in photos for _ in range(12)])
+    from app.sources import probe_video, read_frames
+
+    frames = (  # every sixth, as `calibrate --video` looks at 24 fps video
+        (str(i), f) for i, f in enumerate(read_frames(video, probe_video(video))) if i % 6 == 0
+    )
+    found = calibrate_frames(frames)
+    assert len(found.images_used) == len(dashcam.images_used)
+    assert {int(name) // 12 for name in found.images_used} == {
+        i
+        for i, p in enumerate(list_images(data_dir / "camera_cal"))
+        if p.name in dashcam.images_used
+    }
+    np.testing.assert_allclose(
+        found.camera_matrix[:2, :2], dashcam.camera_matrix[:2, :2], rtol=0.01
+    )
+    assert found.rms < 1.5
+
+
+def test_a_video_without_a_board_is_refused(test_video: Path, tmp_path: Path) -> None:
+    out = tmp_path / "cal.json"
+    result = run_cli("calibrate", "--video", test_video, "--out", out)
+    assert_one_line_error(result, "distinct views of the whole 9x6 board", "--board")
+    assert not out.exists()
+    both = run_cli("calibrate", "--video", test_video, "--images", tmp_path, "--out", out)
+    assert_one_line_error(both, "--images or --video")
