@@ -16,6 +16,12 @@ from camera_cal.calibration import (
 )
 
 ASPECT_TOLERANCE = 0.01
+# The undistorted picture keeps the lens's focal length, so its distances keep the lens's scale;
+# a barrel lens's sides then stretch out of the frame. The shipped lens still shows 92 % of its
+# picture's width (along the principal point's row); a wider one would show much less (one of
+# focal length half the width, 78 %: the next lanes' cars cut off), so its view is zoomed out
+# just enough to show this share.
+MIN_KEPT_WIDTH = 0.9
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,19 +79,60 @@ def scaled_camera_matrix(calibration: Calibration, size: tuple[int, int]) -> NDA
     return matrix
 
 
+def kept_width(
+    calibration: Calibration, size: tuple[int, int], matrix: NDArray[np.float64]
+) -> float:
+    """The share of the picture's width, along the principal point's row, that the undistorted
+    view through `matrix` shows (for frames of `size`; the rest falls outside its frame)."""
+    lens = scaled_camera_matrix(calibration, size)
+    row = matrix[1, 2]
+    ends = np.array([[0.0, row], [size[0] - 1.0, row]])
+    rays = np.column_stack([(ends - matrix[:2, 2]) / np.diag(matrix)[:2], np.ones(2)])
+    seen, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), lens, calibration.dist_coeffs)
+    left, right = np.clip(seen.reshape(2, 2)[:, 0], 0.0, size[0] - 1.0)
+    return float((right - left) / (size[0] - 1.0))
+
+
+def output_camera_matrix(calibration: Calibration, size: tuple[int, int]) -> NDArray[np.float64]:
+    """The camera matrix of the undistorted frames of `size`: the lens's own, or, for a lens
+    whose undistorted view would show less than MIN_KEPT_WIDTH of the picture's width, with its
+    focal length shortened (about the same principal point) until it shows that share."""
+    matrix = scaled_camera_matrix(calibration, size)
+    if kept_width(calibration, size, matrix) >= MIN_KEPT_WIDTH:
+        return matrix
+
+    def zoomed(factor: float) -> NDArray[np.float64]:
+        out = matrix.copy()
+        out[0, 0] *= factor
+        out[1, 1] *= factor
+        return out
+
+    low, high = 0.05, 1.0  # shortest focal length tried; the lens's own
+    for _ in range(40):  # the longest focal length that shows the share
+        middle = (low + high) / 2
+        low, high = (
+            (middle, high)
+            if kept_width(calibration, size, zoomed(middle)) >= MIN_KEPT_WIDTH
+            else (low, middle)
+        )
+    return zoomed(low)
+
+
 def build_undistorter(calibration: Calibration, size: tuple[int, int]) -> Undistorter:
     """Precompute fixed-point remap maps for frames of `size` (width, height)."""
-    matrix = scaled_camera_matrix(calibration, size)
+    lens = scaled_camera_matrix(calibration, size)
+    matrix = output_camera_matrix(calibration, size)
     map1, map2 = cv2.initUndistortRectifyMap(
-        matrix, calibration.dist_coeffs, None, matrix, size, cv2.CV_16SC2
+        lens, calibration.dist_coeffs, None, matrix, size, cv2.CV_16SC2
     )
     return Undistorter(size=size, camera_matrix=matrix, map1=map1, map2=map2)
 
 
 def calibrated_scale_height(calibration: Calibration, size: tuple[int, int]) -> float:
     """The scale height (see `camera_cal.scene.scale_height`) of frames of `size` from a
-    calibrated camera: its focal length in units of the shipped camera's, whose 16:9 picture
-    the stages were tuned on, so distances follow the lens instead of an assumed one."""
+    calibrated camera: the undistorted frames' focal length in units of the shipped camera's,
+    whose 16:9 picture the stages were tuned on, so distances follow the lens instead of an
+    assumed one."""
     shipped = load_calibration(default_calibration_path())
-    fy = scaled_camera_matrix(calibration, size)[1, 1]
+    fy = output_camera_matrix(calibration, size)[1, 1]
     return float(fy / shipped.camera_matrix[1, 1] * shipped.image_size[1])

@@ -22,6 +22,7 @@ from camera_cal import (
     save_calibration,
 )
 from camera_cal.calibration import find_board_corners, list_images
+from camera_cal.undistort import kept_width, scaled_camera_matrix
 from tests.helpers import assert_one_line_error, chessboard_frames, run_cli
 
 
@@ -136,6 +137,46 @@ def test_a_calibrated_lens_sets_the_scale_the_stages_work_in() -> None:
     matrix[:2, :2] *= 2
     longer = dataclasses.replace(cal, camera_matrix=matrix)
     assert calibrated_scale_height(longer, (1280, 720)) == pytest.approx(1440)
+
+
+def test_a_wide_lens_keeps_the_sides_of_its_picture() -> None:
+    """A lens of focal length half the width with strong barrel distortion: undistorted at its
+    own focal length, it shows 78 % of its picture's width (a car at the side, in the next lane,
+    is cut off); the undistorted view is zoomed out until 90 % stays, and the stages' scale
+    follows that view. The shipped lens (92 % shown) is undistorted at its own focal length."""
+    size = (1280, 720)
+    matrix = np.array([[640.0, 0, 645], [0, 640.0, 355], [0, 0, 1]])
+    dist = np.array([-0.32, 0.11, 0.0, 0.0, -0.015])
+    wide = Calibration(camera_matrix=matrix, dist_coeffs=dist, image_size=size)
+    undistorter = build_undistorter(wide, size)
+    assert undistorter.camera_matrix[0, 0] < matrix[0, 0]
+    assert kept_width(wide, size, undistorter.camera_matrix) == pytest.approx(0.9, abs=1e-3)
+    assert kept_width(wide, size, matrix) < 0.8
+    # Dots 7 % of the width in from the picture's sides, along the principal row.
+    sides = np.array([[90.0, 355.0], [1190.0, 355.0]])
+    photo = np.dstack([_dot_image(sides, size)] * 3)
+    n, _, _, centroids = cv2.connectedComponentsWithStats(
+        (undistorter(photo)[:, :, 0] > 60).astype(np.uint8)
+    )
+    assert n - 1 == len(sides)  # both still in the picture, where the lens puts them
+    expected = cv2.undistortPoints(
+        sides.reshape(-1, 1, 2), matrix, dist, P=undistorter.camera_matrix
+    ).reshape(-1, 2)
+    found = centroids[1:]  # (the stretched dots' centroids lie within 2 px)
+    assert np.linalg.norm(found[:, None] - expected[None], axis=2).min(axis=1).max() < 2.5
+    # At the lens's own focal length the same dots would fall outside the frame.
+    same = cv2.undistortPoints(sides.reshape(-1, 1, 2), matrix, dist, P=matrix).reshape(-1, 2)
+    assert ((same[:, 0] < 0) | (same[:, 0] > size[0] - 1)).all()
+    shipped = load_calibration(default_calibration_path())
+    assert calibrated_scale_height(wide, size) == pytest.approx(
+        undistorter.camera_matrix[1, 1] / shipped.camera_matrix[1, 1] * 720
+    )
+    for frame_size in ((1280, 720), (1920, 1080), (854, 480)):
+        shipped_undistorter = build_undistorter(shipped, frame_size)
+        assert kept_width(shipped, frame_size, shipped_undistorter.camera_matrix) > 0.91
+        np.testing.assert_array_equal(
+            shipped_undistorter.camera_matrix, scaled_camera_matrix(shipped, frame_size)
+        )
 
 
 def test_other_aspect_ratio_is_refused() -> None:
