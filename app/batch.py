@@ -50,6 +50,9 @@ class BatchOptions:
     out: Path
     video: bool = True
     calibration: str | None = None  # a calibration file, or None for no undistortion
+    # The user named the calibration: a video it does not fit fails; else it is processed
+    # without undistortion (see `app.drivers.calibration_for`).
+    calibration_required: bool = True
     model: str | None = None  # None: the shipped model
 
 
@@ -192,6 +195,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         record,
         default_annotators(),
         vehicles_in_worker=False,
+        calibration_required=options.calibration_required,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]

@@ -234,6 +234,7 @@ def process_command(
             events_file=events,
             horizon_y=horizon,
             log=lambda m: typer.echo(m, err=True),
+            calibration_required=calibration != DEFAULT_CALIBRATION,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -277,6 +278,7 @@ def batch_command(
         out=out.resolve(),
         video=video,
         calibration=None if calibration.lower() == "none" else str(Path(calibration).resolve()),
+        calibration_required=calibration != DEFAULT_CALIBRATION,
         model=str(model.resolve()) if model is not None else None,
     )
     summary = run_batch(
@@ -313,7 +315,14 @@ def debug_command(
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
     pipeline = Pipeline(cal, *stages, horizon_y=horizon)
-    written = run_debug(source, span, folder, pipeline, log=lambda m: typer.echo(m, err=True))
+    written = run_debug(
+        source,
+        span,
+        folder,
+        pipeline,
+        log=lambda m: typer.echo(m, err=True),
+        calibration_required=calibration != DEFAULT_CALIBRATION,
+    )
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 
 

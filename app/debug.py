@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
-from app.drivers import check_horizon
+from app.drivers import calibration_for, check_horizon
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -168,9 +168,15 @@ def run_debug(
     out_dir: Path,
     pipeline: Pipeline,
     log: Callable[[str], None] = print,
+    calibration_required: bool = True,
 ) -> list[Path]:
-    """Process the clip up to the chosen frames and write their intermediates; returns files."""
+    """Process the clip up to the chosen frames and write their intermediates; returns files.
+    The pipeline's calibration is left out for a clip of another aspect ratio unless
+    `calibration_required` (see `calibration_for`)."""
     info = probe_video(source)
+    pipeline.calibration = calibration_for(
+        pipeline.calibration, info.size, source.name, calibration_required, log
+    )
     first, last = frames
     if first >= info.n_frames:
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")

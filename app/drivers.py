@@ -64,6 +64,28 @@ def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
         )
 
 
+def calibration_for(
+    calibration: Calibration | None,
+    size: tuple[int, int],
+    name: str,
+    required: bool,
+    log: Callable[[str], None],
+) -> Calibration | None:
+    """The calibration to undistort `name`'s frames of `size` with: `calibration` where it fits.
+    Frames of another aspect ratio come from another camera: without a calibration the user
+    named (`required`) they are processed without undistortion, and `log` says so; with one,
+    `CalibrationMismatch` says it does not fit."""
+    if calibration is None or fits(calibration, size) or required:
+        return calibration
+    cw, ch = calibration.image_size
+    log(
+        f"note: {name} is {size[0]}x{size[1]}, not of the shipped calibration's aspect ratio "
+        f"({cw}x{ch}): another camera, processed without undistortion (pass --calibration FILE "
+        "to undistort it)"
+    )
+    return None
+
+
 def process_video(
     source: Path,
     output: Path | None,
@@ -78,9 +100,12 @@ def process_video(
     events_file: Path | None = None,
     horizon_y: float | None = None,
     log: Callable[[str], None] = lambda message: None,
+    calibration_required: bool = True,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square).
+    A `calibration` of another aspect ratio is refused if `calibration_required`, else left out
+    (see `calibration_for`).
 
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
@@ -93,6 +118,9 @@ def process_video(
         check_horizon(horizon_y, info.size)
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
+        calibration = calibration_for(
+            calibration, info.size, source.name, calibration_required, log
+        )
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()

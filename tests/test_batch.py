@@ -231,3 +231,23 @@ def test_events_table_holds_each_event(tmp_path: Path) -> None:
     write_table_parts(tmp_path, "k", "a/b.mp4", [], [event_record(event)])
     (row,) = pq.read_table(tmp_path / "events").to_pylist()
     assert row == {"video": "a/b.mp4"} | event_record(event)
+
+
+def test_a_clip_of_another_camera_is_done_without_undistortion(
+    test_video: Path, tmp_path: Path
+) -> None:
+    """As `process` does: a 4:3 clip is not the shipped 16:9 dashcam's, so by default it is
+    processed without undistortion rather than failed."""
+    from app.sources import ffmpeg_binary
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    clip = folder / "square.mp4"
+    scale = ["-vf", "scale=640:480,setsar=1", "-t", "0.4"]
+    command = [ffmpeg_binary(), "-loglevel", "error", "-i", str(test_video), *scale, str(clip)]
+    subprocess.run(command, check=True)
+    out = tmp_path / "out"
+    result = run_cli("batch", folder, "--out", out, "--workers", "1", "--no-video")
+    assert result.returncode == 0, result.stderr
+    assert "1 done, 0 failed" in result.stdout
+    assert read_record(out / "square.jsonl")[0]["size"] == [640, 480]

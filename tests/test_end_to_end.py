@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from app.sources import ffmpeg_binary, probe_video, read_frames
+from camera_cal import default_calibration_path
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
 
@@ -76,10 +77,28 @@ def test_other_camera_with_calibration_none(clips: dict[str, Path], tmp_path: Pa
     assert lanes[-1]["left"][0][0] < 480 < lanes[-1]["right"][0][0]
 
 
-@pytest.mark.parametrize(
-    ("clip", "fragment"),
-    [("square", "aspect ratio"), ("truncated", "truncated"), ("empty", "empty")],
-)
+def test_another_aspect_ratio_is_another_camera(clips: dict[str, Path], tmp_path: Path) -> None:
+    """A 4:3 clip is not from the shipped 16:9 dashcam: by default it is processed without
+    undistortion, with a note; a calibration the user names that does not fit is refused."""
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    result = run_cli("process", clips["square"], "-o", out, "--json", record)
+    assert result.returncode == 0, result.stderr
+    assert "not of the shipped calibration's aspect ratio" in result.stderr
+    assert "without undistortion" in result.stderr
+    assert count_frames(out)[0].size == (640, 480)
+    assert read_record(record)[0]["size"] == [640, 480]
+    named = tmp_path / "named"
+    named.mkdir()
+    calibration = tmp_path / "dashcam.json"
+    calibration.write_text(default_calibration_path().read_text())
+    refused = run_cli(
+        "process", clips["square"], "-o", named / "o.mp4", "--calibration", calibration
+    )
+    assert_one_line_error(refused, "aspect ratio", "--calibration none")
+    assert not list(named.iterdir())
+
+
+@pytest.mark.parametrize(("clip", "fragment"), [("truncated", "truncated"), ("empty", "empty")])
 def test_bad_videos(clips: dict[str, Path], tmp_path: Path, clip: str, fragment: str) -> None:
     out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
     result = run_cli("process", clips[clip], "-o", out, "--json", record)
