@@ -5,10 +5,13 @@ from __future__ import annotations
 import json
 import sys
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
+import numpy as np
 import typer
+from numpy.typing import NDArray
 
 from app.errors import USER_ERRORS, InputError, Interrupted, describe
 from app.runtime import tune_process
@@ -138,15 +141,25 @@ CALIBRATION_LOOKS_PER_S = 4.0
 
 
 def _calibrate_video(video: Path, board: tuple[int, int]) -> Calibration:
-    """Calibrate from the upright frames of a chessboard video, a few per second."""
+    """Calibrate from the upright frames of a chessboard video, a few per second (a progress
+    bar on a terminal: a look where the board is costs tens of milliseconds)."""
+    from app.progress import Progress
     from app.sources import probe_video, read_frames
 
     info = probe_video(video)
     step = max(1, round(info.fps / CALIBRATION_LOOKS_PER_S)) if info.fps > 0 else 1
-    frames = (
-        (f"frame {i}", frame) for i, frame in enumerate(read_frames(video, info)) if i % step == 0
-    )
-    return calibrate_frames(frames, board=board)
+    progress = Progress(-(-info.n_frames // step), label=video.name, unit="looks/s")
+
+    def looks() -> Iterator[tuple[str, NDArray[np.uint8]]]:
+        for i, frame in enumerate(read_frames(video, info)):
+            if i % step == 0:
+                yield f"frame {i}", frame
+                progress.update()
+
+    try:
+        return calibrate_frames(looks(), board=board)
+    finally:
+        progress.close()
 
 
 def _calibration(value: str) -> Calibration | None:
