@@ -17,6 +17,7 @@ import pytest
 from app import sources
 from app.evaluate import evaluate, load_labels
 from app.sources import ffmpeg_binary, probe_video, read_frames
+from camera_cal import default_calibration_path
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
 SCHEMA = json.loads((Path(__file__).parents[1] / "app" / "record.schema.json").read_text())
@@ -204,8 +205,17 @@ def test_rotated_video_is_processed_upright(made: dict[str, Path], tmp_path: Pat
 def test_rotated_video_with_the_landscape_calibration_says_why(
     made: dict[str, Path], tmp_path: Path
 ) -> None:
+    """Upright, the picture is 720x1280: not the shipped 16:9 calibration's. By default it is
+    processed without undistortion and a note says why; the calibration named is refused."""
     result = run_cli("process", made["rotated.mp4"], "-o", tmp_path / "o.mp4")
-    assert_one_line_error(result, "720x1280", "--calibration none")
+    assert result.returncode == 0, result.stderr
+    assert "720x1280" in result.stderr and "without undistortion" in result.stderr
+    named = tmp_path / "dashcam.json"
+    named.write_text(default_calibration_path().read_text())
+    refused = run_cli(
+        "process", made["rotated.mp4"], "-o", tmp_path / "n.mp4", "--calibration", named
+    )
+    assert_one_line_error(refused, "720x1280", "--calibration none")
 
 
 def _digest(path: Path) -> str:
