@@ -96,10 +96,15 @@ def chessboard_frames(
     inside = (xs >= -1) & (xs < cols) & (ys >= -1) & (ys < rows)
     texture = np.where(((np.floor(xs) + np.floor(ys)) % 2 == 0) & inside, 20, 235)
     to_board = np.array([[1 / px, 0, -margin - 1], [0, 1 / px, -margin - 1], [0, 0, 1]])
-    # Where each pixel of the distorted picture looks in the pinhole picture.
+    # Where each pixel of the distorted picture looks in the pinhole picture, drawn on a canvas
+    # as large as those places reach (a barrel lens sees more than a pinhole of its size).
     grid = np.mgrid[0:height, 0:width][::-1].reshape(2, -1).T.astype(np.float32)
     pinhole = cv2.undistortPoints(grid.reshape(-1, 1, 2), matrix, dist, P=matrix)
     maps = pinhole.reshape(height, width, 2).astype(np.float32)
+    origin = np.floor(maps.reshape(-1, 2).min(axis=0)) - 2
+    canvas = tuple(int(v) for v in np.ceil(maps.reshape(-1, 2).max(axis=0) - origin) + 2)
+    maps -= origin.astype(np.float32)
+    shift_origin = np.array([[1, 0, -origin[0]], [0, 1, -origin[1]], [0, 0, 1]])
     rng = np.random.default_rng(seed)
     centre = np.array([(cols - 1) / 2, (rows - 1) / 2, 0.0])
     frames: list[NDArray[np.uint8]] = []
@@ -108,9 +113,14 @@ def chessboard_frames(
         target = [rng.uniform(0.2, 0.8) * width, rng.uniform(0.25, 0.75) * height, 1.0]
         distance = rng.uniform(14, 22) * matrix[0, 0] / width
         shift = distance * np.linalg.solve(matrix, target) - rotation @ centre
-        homography = matrix @ np.column_stack([rotation[:, 0], rotation[:, 1], shift]) @ to_board
+        homography = (
+            shift_origin
+            @ matrix
+            @ np.column_stack([rotation[:, 0], rotation[:, 1], shift])
+            @ to_board
+        )
         picture = cv2.warpPerspective(
-            texture.astype(np.uint8), homography, size, flags=cv2.INTER_AREA, borderValue=128
+            texture.astype(np.uint8), homography, canvas, flags=cv2.INTER_AREA, borderValue=128
         )
         seen = cv2.remap(picture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderValue=128)
         frames += [np.dstack([seen] * 3)] * hold
