@@ -54,6 +54,7 @@ class BatchOptions:
     # without undistortion (see `app.drivers.calibration_for`).
     calibration_required: bool = True
     model: str | None = None  # None: the shipped model
+    camera_height_m: float | None = None  # the cameras' height over the road (see `process`)
 
 
 @dataclass(frozen=True)
@@ -196,6 +197,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         default_annotators(),
         vehicles_in_worker=False,
         calibration_required=options.calibration_required,
+        camera_height_m=options.camera_height_m,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]

@@ -55,6 +55,15 @@ HorizonOption = Annotated[
     float | None,
     typer.Option(metavar="Y", help="Horizon row in pixels (default: estimated from the footage)."),
 ]
+CameraHeightOption = Annotated[
+    float | None,
+    typer.Option(
+        "--camera-height",
+        metavar="M",
+        help="The camera's height over the road in metres, e.g. 2.2 for a lorry's: sizes the "
+        "vehicle search for it (default: a car's, 1.24 m).",
+    ),
+]
 
 
 @cli.callback()
@@ -205,6 +214,7 @@ def process_command(
     verifier: VerifierOption = None,
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
     horizon: HorizonOption = None,
+    camera_height: CameraHeightOption = None,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -232,6 +242,7 @@ def process_command(
             annotators,
             log=lambda m: typer.echo(m, err=True),
             horizon_y=horizon,
+            camera_height_m=camera_height,
         )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
@@ -248,6 +259,7 @@ def process_command(
             horizon_y=horizon,
             log=lambda m: typer.echo(m, err=True),
             calibration_required=calibration != DEFAULT_CALIBRATION,
+            camera_height_m=camera_height,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -279,9 +291,13 @@ def batch_command(
     force: Annotated[bool, typer.Option(help="Redo inputs already done.")] = False,
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
     model: ModelOption = None,
+    camera_height: CameraHeightOption = None,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
+    from app.drivers import check_camera_height
+
+    check_camera_height(camera_height)
 
     entries = find_inputs(inputs)
     if not entries:
@@ -293,6 +309,7 @@ def batch_command(
         calibration=None if calibration.lower() == "none" else str(Path(calibration).resolve()),
         calibration_required=calibration != DEFAULT_CALIBRATION,
         model=str(model.resolve()) if model is not None else None,
+        camera_height_m=camera_height,
     )
     summary = run_batch(
         entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
@@ -313,10 +330,12 @@ def debug_command(
     model: ModelOption = None,
     verifier: VerifierOption = None,
     horizon: HorizonOption = None,
+    camera_height: CameraHeightOption = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
     from app.debug import parse_frames, run_debug
+    from app.drivers import check_camera_height
     from app.outputs import check_debug_folder
     from app.pipeline import Pipeline
     from app.sources import check_input
@@ -327,7 +346,8 @@ def debug_command(
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
-    pipeline = Pipeline(cal, *stages, horizon_y=horizon)
+    check_camera_height(camera_height)
+    pipeline = Pipeline(cal, *stages, horizon_y=horizon, camera_height_m=camera_height)
     written = run_debug(
         source,
         span,

@@ -55,6 +55,20 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
     return first, last
 
 
+# Camera heights over the road a user may state, in metres (a car's bumper to a lorry's roof).
+CAMERA_HEIGHTS_M = (0.3, 5.0)
+
+
+def check_camera_height(height_m: float | None) -> None:
+    """A user's camera height must be one a vehicle can have."""
+    low, high = CAMERA_HEIGHTS_M
+    if height_m is not None and not low <= height_m <= high:
+        raise InputError(
+            f"--camera-height {height_m:g} m is not a dashcam's height over the road; "
+            f"pass metres from {low:g} to {high:g} (a car's is about 1.2, a lorry's 2-2.5)"
+        )
+
+
 def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
     """A user's horizon row must lie inside the frame."""
     if horizon_y is not None and not 0 <= horizon_y < size[1]:
@@ -101,6 +115,7 @@ def process_video(
     horizon_y: float | None = None,
     log: Callable[[str], None] = lambda message: None,
     calibration_required: bool = True,
+    camera_height_m: float | None = None,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square).
@@ -109,13 +124,15 @@ def process_video(
 
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
-    `horizon_y` fixes the horizon row instead of estimating it from the footage.
+    `horizon_y` fixes the horizon row instead of estimating it from the footage;
+    `camera_height_m` (metres over the road) sizes the vehicle search for a camera that high.
     """
     warm_up = warm_up_opencv()
     try:
         info = probe_video(source)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
         check_horizon(horizon_y, info.size)
+        check_camera_height(camera_height_m)
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
         calibration = calibration_for(
@@ -128,7 +145,9 @@ def process_video(
     count = 0
     progress = Progress(last - first, label=source.name)
     with (
-        Pipeline(calibration, lanes, vehicles, vehicles_in_worker, horizon_y) as pipeline,
+        Pipeline(
+            calibration, lanes, vehicles, vehicles_in_worker, horizon_y, camera_height_m
+        ) as pipeline,
         ExitStack() as sinks,
     ):
         pipeline.prepare(info.size, info.fps, first)
@@ -188,6 +207,7 @@ def process_still(
     annotators: Sequence[Annotator] = (),
     log: Callable[[str], None] = lambda message: None,
     horizon_y: float | None = None,
+    camera_height_m: float | None = None,
 ) -> RunSummary:
     """Process one still into an annotated image (and a one-line record).
 
@@ -197,6 +217,7 @@ def process_still(
     image = read_image(source)
     size = (image.shape[1], image.shape[0])
     check_horizon(horizon_y, size)
+    check_camera_height(camera_height_m)
     started = time.perf_counter()
     if calibration is not None and not fits(calibration, size):
         cw, ch = calibration.image_size
@@ -205,7 +226,9 @@ def process_still(
             f"({cw}x{ch}); processing it without undistortion"
         )
         calibration = None
-    with Pipeline(calibration, lanes, vehicles, horizon_y=horizon_y) as pipeline:
+    with Pipeline(
+        calibration, lanes, vehicles, horizon_y=horizon_y, camera_height_m=camera_height_m
+    ) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)
     with ExitStack() as sinks:

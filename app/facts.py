@@ -47,6 +47,15 @@ class RoadGeometry:
         k = metres / (1 / (far - horizon) - 1 / (near - horizon))
         return cls(view, float(horizon), float(k))
 
+    @property
+    def camera_height_m(self) -> float:
+        """The camera's height over the road as the warp reads it: a row d pixels below the
+        horizon shows d / height pixels a metre across (for the tuned warp, 1.24 m)."""
+        w, h = self.view.frame_size
+        row = self.horizon_y + 0.5 * (h - 1 - self.horizon_y)
+        across = self.lateral(np.array([[w / 2, row], [w / 2 + 1.0, row]]))
+        return float((row - self.horizon_y) * (across[1] - across[0]))
+
     def distance(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance ahead of the camera, in metres, of road points at frame rows `rows`
         (inf at or above the horizon)."""

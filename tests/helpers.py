@@ -125,3 +125,14 @@ def chessboard_frames(
         seen = cv2.remap(picture, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderValue=128)
         frames += [np.dstack([seen] * 3)] * hold
     return frames
+
+
+def raised_camera(frame: NDArray[np.uint8], horizon: float, factor: float) -> NDArray[np.uint8]:
+    """The frame as a camera `factor` times higher over the same road would see it (same lens
+    and horizon): what was d rows below the horizon is d * factor below it (the road only;
+    a vehicle comes out stretched)."""
+    height, width = frame.shape[:2]
+    rows = np.arange(height, dtype=np.float32)
+    source = np.where(rows > horizon, horizon + (rows - horizon) / factor, rows)
+    map_x, map_y = np.meshgrid(np.arange(width, dtype=np.float32), source.astype(np.float32))
+    return np.asarray(cv2.remap(frame, map_x, map_y, cv2.INTER_LINEAR), np.uint8)

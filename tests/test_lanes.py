@@ -8,6 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from app.evaluate import _lane_x, evaluate, load_labels
 from lanes.config import LaneConfig
@@ -16,7 +17,7 @@ from lanes.line import Line
 from lanes.measure import implausible_lane, radius_of_curvature
 from lanes.perspective import birdseye_for
 from lanes.search import LinePixels, fit_lane, fit_line, paint_between
-from tests.helpers import process_clip
+from tests.helpers import process_clip, raised_camera
 
 
 def _still(data_dir: Path, name: str) -> np.ndarray:
@@ -280,17 +281,6 @@ def test_paint_between_finds_a_dashed_line_midway() -> None:
     assert paint_between(mask, left, right, np.linspace(0.3, 0.7, 17), 2)[1] == 0.0
 
 
-def _raised(frame: np.ndarray, horizon: float, factor: float) -> np.ndarray:
-    """The frame as a camera `factor` times higher over the same road would see it (same lens
-    and horizon): what was d rows below the horizon is d * factor below it (the road only;
-    a vehicle comes out stretched, so this is a lane and speed case)."""
-    height, width = frame.shape[:2]
-    rows = np.arange(height, dtype=np.float32)
-    source = np.where(rows > horizon, horizon + (rows - horizon) / factor, rows)
-    map_x, map_y = np.meshgrid(np.arange(width, dtype=np.float32), source.astype(np.float32))
-    return np.asarray(cv2.remap(frame, map_x, map_y, cv2.INTER_LINEAR), np.uint8)
-
-
 def test_a_camera_mounted_higher_gets_its_lanes_and_speed(data_dir: Path) -> None:
     """A camera 1.6 times higher (a lorry's) sees each lane 1.6 times narrower at a row: the
     tuned warp took it for a 2.3 m lane, which no road has, and drew two lanes or none. The
@@ -317,7 +307,7 @@ def test_a_camera_mounted_higher_gets_its_lanes_and_speed(data_dir: Path) -> Non
             ]
 
     plain = run(frames)
-    raised = run([_raised(f, horizon, factor) for f in frames])
+    raised = run([raised_camera(f, horizon, factor) for f in frames])
     assert {r["ground_scale"] for r in plain} == {1.0}
     settled = next(k for k, r in enumerate(raised) if r["ground_scale"] != 1.0)
     assert settled < 2.5 * info.fps and abs(raised[-1]["ground_scale"] * factor - 1) < 0.1
@@ -329,20 +319,26 @@ def test_a_camera_mounted_higher_gets_its_lanes_and_speed(data_dir: Path) -> Non
     assert abs(ratio - 1) < 0.15, ratio
     labels = [load_labels(data_dir / "labels" / f"{clip.stem}.json") for clip in clips]
     first = len(per_clip[0])
-    errors = []
-    for k in after:
-        truth = labels[0].get(k) if k < first else labels[1].get(k - first)
-        if truth is None:
-            continue
-        lane = raised[k].get("lane")
-        for side in ("left", "right"):
-            for row, x in truth.lane[side].items():
-                moved = horizon + (row - horizon) * factor
-                if moved < info.size[1]:
-                    found = _lane_x(lane.get(side) if lane else None, round(moved))
-                    errors.append(np.inf if found is None else abs(found - x))
+
+    def errors(records: list[dict[str, Any]], frames: range) -> NDArray[np.float64]:
+        """Lane x errors against the labels moved as the raised camera sees them."""
+        out = []
+        for k in frames:
+            truth = labels[0].get(k) if k < first else labels[1].get(k - first)
+            if truth is None:
+                continue
+            lane = records[k].get("lane")
+            for side in ("left", "right"):
+                for row, x in truth.lane[side].items():
+                    moved = horizon + (row - horizon) * factor
+                    if moved < info.size[1]:
+                        found = _lane_x(lane.get(side) if lane else None, round(moved))
+                        out.append(np.inf if found is None else abs(found - x))
+        return np.asarray(out)
+
+    learned = errors(raised, after)
     # (With the tuned scale 43 % of these points were within 20 px.)
-    assert len(errors) > 300 and np.mean(np.asarray(errors) <= 20) >= 0.95
+    assert len(learned) > 300 and np.mean(learned <= 20) >= 0.95
 
 
 def test_covered_maps_a_vehicle_box_onto_the_birdseye_road() -> None:

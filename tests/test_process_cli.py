@@ -150,3 +150,27 @@ def test_training_refuses_an_unknown_patch_size(tmp_path: Path) -> None:
     result = run_cli("train", "--patch", "48", "--out", tmp_path / "m.npz")
     assert_one_line_error(result, "--patch 48", "64 or 32")
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_camera_height_option(test_video: Path, tmp_path: Path) -> None:
+    """--camera-height takes a dashcam's height in metres (it sizes the vehicle search: see
+    test_vehicles); a height no dashcam has is refused in one line."""
+    record = tmp_path / "r.jsonl"
+    result = run_cli(
+        "process",
+        test_video,
+        "-o",
+        tmp_path / "o.mp4",
+        "--json",
+        record,
+        "--end",
+        "0.4",
+        "--camera-height",
+        "2.2",
+    )
+    assert result.returncode == 0, result.stderr
+    assert len(record.read_text().splitlines()) == 10
+    for height in ("0.1", "9"):
+        bad = run_cli("process", test_video, "-o", tmp_path / "x.mp4", "--camera-height", height)
+        assert_one_line_error(bad, f"--camera-height {height} m")
+    assert not (tmp_path / "x.mp4").exists()

@@ -137,10 +137,12 @@ class VehicleDetector:
         horizon_y: float | None = None,
         live: tuple[int, int, int, int] | None = None,
         scale_height: float | None = None,
+        ground_scale: float = 1.0,
     ) -> View:
-        """Where to search frames of `size`: the given horizon, live box and scale, or the
-        defaults (the whole frame, its height). The bands span the live box's width, wherever
-        the road's vanishing point is: it does not move them."""
+        """Where to search frames of `size`: the given horizon, live box, scale and ground
+        scale, or the defaults (the whole frame, its height, the tuned camera's height). The
+        bands span the live box's width, wherever the road's vanishing point is: it does not
+        move them."""
         default = View.default(size, self.config.reference_horizon)
         box = default.live if live is None else live
         return View(
@@ -148,6 +150,7 @@ class VehicleDetector:
             default.horizon_y if horizon_y is None else horizon_y,
             box,
             float(box[3] - box[1]) if scale_height is None else scale_height,
+            ground_scale,
         )
 
     def search(
@@ -206,13 +209,14 @@ class VehicleDetector:
         ground_scale: float = 1.0,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
-        (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given;
-        `vanishing_x` and `ground_scale` do not move them (cars a higher camera sees smaller at
-        a row are left to the bands' spread of sizes: no labelled footage of one to tune on);
-        windows over `overlays`, captions or parts of the car, do not heat)."""
+        (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given,
+        their windows sized by `ground_scale`, a car's size at a row against the tuned camera's;
+        `vanishing_x` does not move them; windows over `overlays`, captions or parts of the car,
+        do not heat)."""
         cfg = self.config
         h, w = frame.shape[:2]
-        view = self.view((w, h), horizon_y, live, scale_height)
+        view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
+        smallest = cfg.min_box * view.scale_height * view.ground_scale
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         hits = self.search(frame, parity, view)
@@ -240,7 +244,7 @@ class VehicleDetector:
             region_boxes = snap_bottoms(
                 frame, region_boxes, view.live, cfg.bottom_reach, cfg.bottom_min_rise
             )
-        big = smaller_sides(region_boxes) >= cfg.min_box * view.scale_height
+        big = smaller_sides(region_boxes) >= smallest
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
@@ -248,7 +252,7 @@ class VehicleDetector:
         shown = self.tracker.update(regions, picture).clipped(picture)
         # A car leaving at the side coasts out with its outer edge held at the picture's edge
         # (its boxes were cut there): once its box is thinner than any found, it has left.
-        shown = shown.subset(smaller_sides(shown.boxes) >= cfg.min_box * view.scale_height)
+        shown = shown.subset(smaller_sides(shown.boxes) >= smallest)
         debug = (
             VehicleDebug(
                 hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold, vetoed

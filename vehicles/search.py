@@ -93,13 +93,16 @@ class BandHits:
 @dataclass(frozen=True)
 class View:
     """Where vehicles can be in frames of `size`: the horizon row, the live box (x0, y0, x1,
-    y1; inside black bars) and `scale_height`, the height of the 16:9 picture of the tuned lens
-    at this picture's scale. Bands are placed relative to these, so any framing works."""
+    y1; inside black bars), `scale_height`, the height of the 16:9 picture of the tuned lens
+    at this picture's scale, and `ground_scale`, a car's size at a row against the tuned
+    camera's (a camera higher over the road sees a car smaller where it meets the road). Bands
+    are placed relative to these, so any framing and camera height works."""
 
     size: tuple[int, int]
     horizon_y: float
     live: tuple[int, int, int, int]
     scale_height: float
+    ground_scale: float = 1.0
 
     @classmethod
     def default(cls, size: tuple[int, int], reference_horizon: float) -> View:
@@ -115,10 +118,12 @@ def band_geometry(
     A band's fractions are of the view's scale height, its rows measured from the horizon (a
     band tuned with the horizon at `reference_horizon` of the height): a car's size in pixels is
     proportional to how far below the horizon it meets the road, whatever the lens, so a band
-    keeps its windows on the cars they fit when the horizon or the size changes."""
+    keeps its windows on the cars they fit when the horizon or the size changes. The ground
+    scale shrinks the windows and keeps the rows: a car meeting the road at a row is that much
+    smaller seen from higher up."""
     lx0, ly0, lx1, ly1 = view.live
     lw, sh = lx1 - lx0, view.scale_height
-    window = band.window * sh
+    window = band.window * sh * view.ground_scale
     scale = window / patch
     y0 = max(round(view.horizon_y + (band.top - reference_horizon) * sh), ly0)
     y1 = round(view.horizon_y + (band.bottom - reference_horizon) * sh)
