@@ -140,9 +140,20 @@ def calibrate_command(
     typer.echo(
         f"calibrated from {source}: "
         f"RMS reprojection error {calibration.rms:.3f} px, fx {m[0, 0]:.1f}, fy {m[1, 1]:.1f}, "
-        f"cx {m[0, 2]:.1f}, cy {m[1, 2]:.1f}; saved {out}"
+        f"cx {m[0, 2]:.1f}, cy {m[1, 2]:.1f}; the board covered {calibration.coverage:.0%} "
+        f"of the picture; saved {out}"
     )
+    if calibration.coverage < GOOD_COVERAGE:
+        typer.echo(
+            "note: the picture's corners and edges, where a lens bends most, were not seen: "
+            "the distortion there is extrapolated; give views with the board near them",
+            err=True,
+        )
 
+
+# The share of the picture the board's corners should have covered: less leaves a wide lens's
+# corners and edges to extrapolation (the shared photos cover most of the picture).
+GOOD_COVERAGE = 0.6
 
 # Frames of a calibration video looked at per second: a board moved by hand changes little
 # in a quarter of a second, and each look costs a few milliseconds (tens where a board is).

@@ -41,6 +41,9 @@ class Calibration:
     dist_coeffs: NDArray[np.float64]
     image_size: tuple[int, int]  # (width, height) of the calibration images
     rms: float = 0.0
+    # The share of the picture inside the outline of all board corners used: beyond it (a wide
+    # lens's corners and edges, where it bends most) the distortion is extrapolated.
+    coverage: float = 0.0
     images_used: tuple[str, ...] = field(default_factory=tuple)
     images_skipped: tuple[str, ...] = field(default_factory=tuple)
 
@@ -193,11 +196,13 @@ def _solve(
     rms, matrix, dist, _, _ = cv2.calibrateCamera(
         [object_grid] * len(views), list(views), size, None, None
     )
+    outline = cv2.convexHull(np.concatenate(list(views)).astype(np.float32))
     return Calibration(
         camera_matrix=np.asarray(matrix, dtype=np.float64),
         dist_coeffs=np.asarray(dist, dtype=np.float64).ravel(),
         image_size=size,
         rms=float(rms),
+        coverage=float(cv2.contourArea(outline) / (size[0] * size[1])),
         images_used=used,
         images_skipped=skipped,
     )
@@ -211,6 +216,7 @@ def save_calibration(calibration: Calibration, path: Path) -> None:
         "dist_coeffs": np.round(calibration.dist_coeffs, 8).tolist(),
         "image_size": list(calibration.image_size),
         "rms": round(calibration.rms, 6),
+        "coverage": round(calibration.coverage, 4),
         "images_used": list(calibration.images_used),
         "images_skipped": list(calibration.images_skipped),
     }
@@ -236,6 +242,7 @@ def load_calibration(path: Path) -> Calibration:
         dist = np.asarray(document["dist_coeffs"], dtype=np.float64).ravel()
         width, height = (int(v) for v in document["image_size"])
         rms = float(document.get("rms", 0.0))
+        coverage = float(document.get("coverage", 0.0))
     except (KeyError, TypeError, ValueError):
         raise CalibrationFileError(
             f"calibration file {path} lacks a field or has a wrong one"
@@ -247,6 +254,7 @@ def load_calibration(path: Path) -> Calibration:
         dist_coeffs=dist,
         image_size=(width, height),
         rms=rms,
+        coverage=coverage,
         images_used=tuple(document.get("images_used", ())),
         images_skipped=tuple(document.get("images_skipped", ())),
     )

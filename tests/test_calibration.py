@@ -56,6 +56,7 @@ def test_calibration_json_round_trip(dashcam: Calibration, tmp_path: Path) -> No
     assert loaded.image_size == dashcam.image_size
     assert loaded.images_used == dashcam.images_used
     assert loaded.rms == pytest.approx(dashcam.rms, abs=1e-6)
+    assert loaded.coverage == pytest.approx(dashcam.coverage, abs=1e-4) and dashcam.coverage > 0.6
 
 
 @pytest.mark.parametrize(
@@ -228,6 +229,9 @@ def test_a_wide_lens_is_calibrated_from_a_video_of_the_board(tmp_path: Path) -> 
     grid = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float32)
     seen = np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), False) >= 0 for x, y in grid])
     assert seen.mean() > 0.4
+    # The outline of the corners used, as the calibration reports it (and says so when small).
+    assert found.coverage == pytest.approx(seen.mean(), abs=0.05)
+    assert ("corners and edges" in result.stderr) == (found.coverage < 0.6)
     points = grid[seen].reshape(-1, 1, 2)
     truth = cv2.undistortPoints(points, matrix, dist, P=matrix).reshape(-1, 2)
     for coeffs, within in ((found.dist_coeffs, 3.0), (np.zeros(5), None)):
