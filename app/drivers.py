@@ -93,9 +93,9 @@ def calibration_for(
         return calibration
     cw, ch = calibration.image_size
     log(
-        f"note: {name} is {size[0]}x{size[1]}, not of the shipped calibration's aspect ratio "
+        f"note: {name} is {size[0]}x{size[1]}, not of the calibration's aspect ratio "
         f"({cw}x{ch}): another camera, processed without undistortion (pass --calibration FILE "
-        "to undistort it)"
+        "of this camera to undistort it)"
     )
     return None
 
@@ -219,13 +219,7 @@ def process_still(
     check_horizon(horizon_y, size)
     check_camera_height(camera_height_m)
     started = time.perf_counter()
-    if calibration is not None and not fits(calibration, size):
-        cw, ch = calibration.image_size
-        log(
-            f"note: {source} is {size[0]}x{size[1]}, not of the calibration's aspect ratio "
-            f"({cw}x{ch}); processing it without undistortion"
-        )
-        calibration = None
+    calibration = calibration_for(calibration, size, source.name, False, log)
     with Pipeline(
         calibration, lanes, vehicles, horizon_y=horizon_y, camera_height_m=camera_height_m
     ) as pipeline:
