@@ -182,6 +182,12 @@ def _calibrate_video(video: Path, board: tuple[int, int]) -> Calibration:
         progress.close()
 
 
+def _named(calibration: str) -> bool:
+    """Whether the user named the --calibration (a file of another aspect ratio is then refused;
+    the shipped default is left out for another camera's frames)."""
+    return calibration != DEFAULT_CALIBRATION
+
+
 def _calibration(value: str) -> Calibration | None:
     """The --calibration option: a calibration file, or None for 'none' (no undistortion)."""
     return None if value.lower() == "none" else load_calibration(Path(value))
@@ -269,7 +275,7 @@ def process_command(
             events_file=events,
             horizon_y=horizon,
             log=lambda m: typer.echo(m, err=True),
-            calibration_required=calibration != DEFAULT_CALIBRATION,
+            calibration_required=_named(calibration),
             camera_height_m=camera_height,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
@@ -318,7 +324,7 @@ def batch_command(
         out=out.resolve(),
         video=video,
         calibration=None if calibration.lower() == "none" else str(Path(calibration).resolve()),
-        calibration_required=calibration != DEFAULT_CALIBRATION,
+        calibration_required=_named(calibration),
         model=str(model.resolve()) if model is not None else None,
         camera_height_m=camera_height,
     )
@@ -346,7 +352,6 @@ def debug_command(
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
     from app.debug import parse_frames, run_debug
-    from app.drivers import check_camera_height
     from app.outputs import check_debug_folder
     from app.pipeline import Pipeline
     from app.sources import check_input
@@ -357,7 +362,6 @@ def debug_command(
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
-    check_camera_height(camera_height)
     pipeline = Pipeline(cal, *stages, horizon_y=horizon, camera_height_m=camera_height)
     written = run_debug(
         source,
@@ -365,7 +369,7 @@ def debug_command(
         folder,
         pipeline,
         log=lambda m: typer.echo(m, err=True),
-        calibration_required=calibration != DEFAULT_CALIBRATION,
+        calibration_required=_named(calibration),
     )
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 
