@@ -27,14 +27,14 @@ from vehicles.model import (
     default_verifier_path,
     load_model,
 )
-from vehicles.refine import snap_bottoms
+from vehicles.refine import reach_toward, snap_bottoms
 from vehicles.search import BandHits, LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
 
 def plain_heat(**settings: Any) -> HeatConfig:
     """Heat settings with every side rule and box correction off unless asked for."""
-    return HeatConfig(**{"edge_peak_fraction": None, "left_extension": 0.0, **settings})
+    return HeatConfig(**{"edge_peak_fraction": None, **settings})
 
 
 def plain_tracking(**settings: Any) -> TrackConfig:
@@ -308,19 +308,37 @@ def test_heatmap_box_of_a_vehicle_at_the_frame_side_covers_its_inner_part() -> N
     assert iou(found[0], [1168, 420, 1280, 540]) > 0.9
 
 
-def test_region_boxes_reach_further_left_but_not_at_the_picture_side() -> None:
-    middle = np.array([[400.0, 420, 528, 540]] * 3)
-    side = np.array([[1216.0, 420, 1344, 540]] * 4 + [[1168.0, 420, 1296, 540]])
-    for windows in (middle, side):
-        plain = _regions_of(windows)
-        extended = _regions_of(windows, left_extension=0.08)
-        assert len(plain) == len(extended) == 1
-        assert (extended[0, 1:] == plain[0, 1:]).all()
-        width = plain[0, 2] - plain[0, 0]
-        # 8 % of the width further left in the middle; a region at the side keeps its width
-        # (the side rule measures it).
-        shift = 0.08 * width if windows is middle else 0.0
-        assert extended[0, 0] == pytest.approx(plain[0, 0] - shift)
+def test_boxes_reach_towards_the_vanishing_column_but_not_past_it_nor_at_the_sides() -> None:
+    live = (0, 0, 1280, 720)
+    boxes = np.array(
+        [
+            [800.0, 400, 900, 470],  # right of the column: its side faces left
+            [300.0, 400, 400, 470],  # left of it: its side faces right
+            [600.0, 400, 700, 470],  # astride it: no side shows
+            [645.0, 400, 745, 470],  # 5 px right of it: reaches the column only
+            [0.0, 400, 100, 470],  # at the picture's sides: kept
+            [1180.0, 400, 1280, 470],
+        ]
+    )
+    reached = reach_toward(boxes, 640.0, 0.08, live, tolerance=2)
+    assert reached.tolist() == [
+        [792.0, 400, 900, 470],
+        [300.0, 400, 408, 470],
+        [600.0, 400, 700, 470],
+        [640.0, 400, 745, 470],
+        [0.0, 400, 100, 470],
+        [1180.0, 400, 1280, 470],
+    ]
+    assert reach_toward(boxes, 640.0, 0.0, live).tolist() == boxes.tolist()
+
+
+def test_a_box_crossing_the_picture_quickly_moves_on_instead() -> None:
+    # An oncoming car left of the column moving left 20 px a frame (a fifth of its width): its
+    # heat trails it, so its box moves on by half a frame's motion and does not reach right.
+    live = (0, 0, 1280, 720)
+    boxes = np.array([[300.0, 400, 400, 470], [800.0, 400, 900, 470]])
+    moved = reach_toward(boxes, 640.0, 0.08, live, motion=np.array([-20.0, 2.0]), fast=0.12)
+    assert moved.tolist() == [[290.0, 400, 390, 470], [792.0, 400, 900, 470]]
 
 
 def test_box_bottoms_move_to_where_the_shadow_meets_the_road() -> None:
@@ -384,6 +402,19 @@ def test_track_moves_a_lagging_measurement_to_where_the_car_is_now() -> None:
     truth_x1 = 900.0 - 20 * 24
     assert abs(last_x1(0.0) - truth_x1) >= 8  # trails the car
     assert abs(last_x1(0.5) - truth_x1) <= 2
+
+
+def test_a_track_reports_its_velocity_while_measured_and_none_while_coasting() -> None:
+    tracker = Tracker(
+        plain_tracking(confirm_frames=3, max_missed=5, show_missed=2, velocity_gain=0.3)
+    )
+    for frame in range(20):
+        box = np.array([[400.0 - 15 * frame, 420, 470 - 15 * frame, 460]])
+        shown = tracker.update(Detections.from_boxes(box, np.ones(1)))
+    (velocity,) = tracker.measured_velocities(shown.ids)
+    np.testing.assert_allclose(velocity, [-15, 0, -15, 0], atol=1.0)
+    coasting = tracker.update(Detections())
+    assert len(coasting) == 1 and not tracker.measured_velocities(coasting.ids).any()
 
 
 def test_track_follows_a_fast_car_and_drops_it_when_it_leaves() -> None:

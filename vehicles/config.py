@@ -65,11 +65,6 @@ class HeatConfig:
     # (mirrored windows past the side pile heat up there); None: as any other region.
     edge_peak_fraction: float | None = 0.2
     split_valley: float = 0.6  # two peaks split a region when the valley is below this x peak
-    # Any other region's box reaches this share of its width further left (not past the picture):
-    # its heat stops short of the vehicle's left side, whichever side of the picture the vehicle
-    # is on (left edges came out a median 8-13 % of the width inside the labelled ones on the
-    # shared clips, every re-framing of them and challenge clip A; right edges 1-4 %).
-    left_extension: float = 0.08
 
 
 @dataclass(frozen=True)
@@ -109,6 +104,13 @@ class DetectorConfig:
     # the rise is at least `bottom_min_rise` grey levels (see vehicles/refine.py).
     bottom_reach: tuple[float, float] | None = (0.3, 0.3)
     bottom_min_rise: float = 8.0
+    # A box reaches this share of its width further towards the road's vanishing column: a car
+    # beside the camera's axis shows its rear (or front) and the side that faces the axis, and
+    # the windows, trained mostly on rear views, heat the end and stop short of that side; a car
+    # whose box moves more than `fast_share` of its width a frame (oncoming traffic) reaches the
+    # way it moves instead, as its heat trails it (see vehicles/refine.py).
+    side_reach: float = 0.08
+    fast_share: float = 0.12
     min_box: float = 0.025  # smallest box side reported / frame height
     # Video frames alternate between two halves of the bands (the heat history spans both).
     interleave: bool = True

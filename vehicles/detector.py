@@ -12,7 +12,7 @@ from vehicles.config import DetectorConfig
 from vehicles.detections import Detections, covered_share, smaller_sides
 from vehicles.heatmap import Heatmap
 from vehicles.model import ModelError, VehicleModel
-from vehicles.refine import snap_bottoms
+from vehicles.refine import reach_toward, snap_bottoms
 from vehicles.search import BandHits, LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
@@ -211,8 +211,8 @@ class VehicleDetector:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given,
         their windows sized by `ground_scale`, a car's size at a row against the tuned camera's;
-        `vanishing_x` does not move them; windows over `overlays`, captions or parts of the car,
-        do not heat)."""
+        `vanishing_x` does not move them, boxes reach towards it; windows over `overlays`,
+        captions or parts of the car, do not heat)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
@@ -253,6 +253,18 @@ class VehicleDetector:
         # A car leaving at the side coasts out with its outer edge held at the picture's edge
         # (its boxes were cut there): once its box is thinner than any found, it has left.
         shown = shown.subset(smaller_sides(shown.boxes) >= smallest)
+        velocity = self.tracker.measured_velocities(shown.ids)
+        column = (lx0 + lx1) / 2 if vanishing_x is None else vanishing_x
+        reached = reach_toward(
+            shown.boxes,
+            column,
+            cfg.side_reach,
+            view.live,
+            motion=(velocity[:, 0] + velocity[:, 2]) / 2,
+            fast=cfg.fast_share,
+            tolerance=cfg.heat.scale,
+        )
+        shown = Detections(reached, shown.scores, shown.ids)
         debug = (
             VehicleDebug(
                 hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold, vetoed

@@ -150,8 +150,7 @@ class Heatmap:
 
         Recent heat is labelled, split at clear valleys between peaks, and each part is kept when it
         touches the thresholded history; its box covers its recent heat above `peak_fraction` of
-        its peak, tighter than the union of square windows, and reaches `left_extension` of its
-        width further left unless it reaches a side of the picture. A region touching the frame's
+        its peak, tighter than the union of square windows. A region touching the frame's
         left or right side takes its horizontal extent at `edge_fraction` of its peak instead:
         windows reaching past the side see the vehicle and its mirror image, so heat piles up at
         the side and the vehicle's inner part falls below the usual fraction.
@@ -181,10 +180,7 @@ class Heatmap:
                     wide = part & (local_heat >= edge)
                     xs = np.nonzero(wide)[1]
                 y0, x0 = window[0].start, window[1].start
-                left, right = x0 + xs.min(), x0 + xs.max() + 1
-                if left > 0 and right < heat.shape[1]:  # a box at a side keeps its width
-                    left = max(left - cfg.left_extension * (right - left), 0.0)
-                boxes.append([left, y0 + ys.min(), right, y0 + ys.max() + 1])
+                boxes.append([x0 + xs.min(), y0 + ys.min(), x0 + xs.max() + 1, y0 + ys.max() + 1])
                 peaks.append(peak)
         out = np.asarray(boxes, dtype=np.float64).reshape(-1, 4) * cfg.scale
         return out, np.asarray(peaks, dtype=np.float64)

@@ -1,8 +1,10 @@
-"""Box edges from the picture itself: where a vehicle meets the road.
+"""Box edges where a vehicle ends, which its heat does not say.
 
 Heat from square windows says where a vehicle is, not where it ends: a saloon and an SUV heat the
 same rows. Below a vehicle lies its shadow and its tyres, darker than the road beyond, so its
 bottom edge is the row where the picture brightens most going down across the vehicle's middle.
+Beside the camera's axis a vehicle shows its side too, on the side facing the axis, which windows
+trained mostly on rear views heat little: its box reaches further that way.
 """
 
 from __future__ import annotations
@@ -45,4 +47,39 @@ def snap_bottoms(
         row = int(np.argmax(rise))
         if rise[row] >= min_rise:
             box[3] = float(top + 1 + row)
+    return out
+
+
+def reach_toward(
+    boxes: NDArray[np.float64],
+    column: float,
+    share: float,
+    live: tuple[int, int, int, int],
+    motion: NDArray[np.float64] | None = None,
+    fast: float = 0.12,
+    lead: float = 0.5,
+    tolerance: float = 4.0,
+) -> NDArray[np.float64]:
+    """The boxes, each reaching `share` of its width further towards `column` (the road's
+    vanishing column, which the side of a car beside the camera's axis faces), but not past it:
+    a box astride it (no side shows) is kept. A box whose `motion` (its centre's px a frame) is
+    over `fast` of its width (oncoming traffic) moves on by `lead` times its motion instead: its
+    heat, from the last frames, trails it. A box within `tolerance` px of a side of the `live`
+    box keeps its width (it is measured there by another rule). Boxes stay in the `live` box."""
+    out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
+    if not len(out):
+        return out
+    x0, x1 = out[:, 0].copy(), out[:, 2].copy()
+    reach = share * (x1 - x0)
+    inside = (x0 > live[0] + tolerance) & (x1 < live[2] - tolerance)
+    moves = np.zeros(len(out)) if motion is None else np.asarray(motion, np.float64)
+    quick = inside & (np.abs(moves) > fast * (x1 - x0))
+    left = inside & ~quick & (x0 >= column)
+    right = inside & ~quick & (x1 <= column)
+    out[left, 0] = np.maximum(x0[left] - reach[left], column)
+    out[right, 2] = np.minimum(x1[right] + reach[right], column)
+    out[quick, 0] += lead * moves[quick]
+    out[quick, 2] += lead * moves[quick]
+    out[:, 0] = np.clip(out[:, 0], live[0], live[2] - 1)
+    out[:, 2] = np.clip(out[:, 2], out[:, 0] + 1, live[2])
     return out

@@ -48,6 +48,12 @@ class Tracker:
         self.tracks = []
         self._next_id = 1
 
+    def measured_velocities(self, ids: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The per-frame velocity of the edges (x1, y1, x2, y2) of the shown tracks `ids` that
+        were measured in this frame; 0 for one coasting on its prediction."""
+        by_id = {t.id: t.velocity * (t.missed == 0) for t in self.tracks if t.id}
+        return np.array([by_id[i] for i in ids.tolist()], np.float64).reshape(-1, 4)
+
     def update(
         self, detections: Detections, region: tuple[float, float, float, float] | None = None
     ) -> Detections:
