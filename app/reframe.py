@@ -31,6 +31,7 @@ from vehicles.detections import iou_matrix
 from vehicles.model import VehicleModel
 
 Box = tuple[int, int, int, int]
+_OTHER_SIDE = {"left": "right", "right": "left"}
 
 # A re-framed copy should differ from the clip by its framing alone. x264's default preset keeps
 # the deblocking filter on; the "ultrafast" one that `process` writes with turns it off, and the
@@ -44,18 +45,26 @@ class Framing:
     """Crop `crop` (x0, y0, x1, y1 of the source; None: all), pad `pad` black pixels (left, top,
     right, bottom), then resize to `size` (None: as it is); `rate` frames out per frame in, at
     `rate` times the frame rate (2: each frame twice, as a camera twice as fast sees a scene
-    moving half as far a frame; 0.5: every other frame)."""
+    moving half as far a frame; 0.5: every other frame); `mirror`: then flip it left to right
+    (a road where traffic keeps left, seen as one where it keeps right)."""
 
     name: str
     crop: Box | None = None
     pad: Box = (0, 0, 0, 0)
     size: tuple[int, int] | None = None
     rate: float = 1.0
+    mirror: bool = False
 
     @property
     def unchanged(self) -> bool:
         """Whether the clip stays as it is (no crop, pad, resize or other frame rate)."""
-        return self.crop is None and not any(self.pad) and self.size is None and self.rate == 1
+        return (
+            self.crop is None
+            and not any(self.pad)
+            and self.size is None
+            and self.rate == 1
+            and not self.mirror
+        )
 
     def source_frame(self, frame: int) -> int:
         """The index of the source frame that the re-framed clip shows as its `frame`."""
@@ -76,19 +85,39 @@ class Framing:
         return self.size or self.padded_size(source)
 
     def affine(self, source: tuple[int, int]) -> tuple[float, float, float, float]:
-        """(sx, sy, dx, dy): a source point (x, y) lands at (x sx + dx, y sy + dy)."""
+        """(sx, sy, dx, dy): a source point (x, y) lands at (x sx + dx, y sy + dy), in pixel-edge
+        coordinates (a mirrored picture's sx is negative: its boxes' sides trade places)."""
         x0, y0, _, _ = self.crop or (0, 0, *source)
         pw, ph = self.padded_size(source)
         ow, oh = self.output_size(source)
         sx, sy = ow / pw, oh / ph
-        return sx, sy, (self.pad[0] - x0) * sx, (self.pad[1] - y0) * sy
+        dx, dy = (self.pad[0] - x0) * sx, (self.pad[1] - y0) * sy
+        if self.mirror:
+            return -sx, sy, ow - dx, dy
+        return sx, sy, dx, dy
+
+    def move_boxes(
+        self, boxes: NDArray[np.float64], source: tuple[int, int]
+    ) -> NDArray[np.float64]:
+        """Boxes (x0, y0, x1, y1) of the source picture where the re-framed picture shows them."""
+        sx, sy, dx, dy = self.affine(source)
+        moved = boxes * np.array([sx, sy, sx, sy]) + np.array([dx, dy, dx, dy])
+        return np.asarray(moved[:, [2, 1, 0, 3]] if self.mirror else moved, np.float64)
+
+    def unmove_boxes(
+        self, boxes: NDArray[np.float64], source: tuple[int, int]
+    ) -> NDArray[np.float64]:
+        """Boxes of the re-framed picture where the source picture shows them."""
+        sx, sy, dx, dy = self.affine(source)
+        back = (boxes - np.array([dx, dy, dx, dy])) / np.array([sx, sy, sx, sy])
+        return np.asarray(back[:, [2, 1, 0, 3]] if self.mirror else back, np.float64)
 
 
 def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     """The framings of issue #15 for a `source`-sized clip: as it is, horizon 10 % of the height
     higher (crop the top) and lower (pad the top, crop the bottom), a narrower field of view (the
-    middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes, and half and twice
-    the frame rate."""
+    middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes, half and twice
+    the frame rate, and mirrored (traffic keeping left, as in the UK, India or Japan)."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)
@@ -104,6 +133,7 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("1920x1080", size=(round(w * 1.5), round(h * 1.5))),
         Framing("half frame rate", rate=0.5),
         Framing("twice the frame rate", rate=2.0),
+        Framing("mirrored", mirror=True),
     )
 
 
@@ -128,6 +158,8 @@ def reframe_image(frame: Frame, framing: Framing) -> Frame:
         shrink = framing.size[0] < out.shape[1]
         interpolation = cv2.INTER_AREA if shrink else cv2.INTER_LINEAR
         out = cv2.resize(out, framing.size, interpolation=interpolation)
+    if framing.mirror:
+        out = out[:, ::-1]
     return np.ascontiguousarray(out)
 
 
@@ -142,14 +174,15 @@ def reframe_labels(
     # What of the picture is real: not a black bar.
     left, top, right, bottom = framing.pad
     pw, ph = framing.padded_size(source)
-    shown = (left * sx, top * sy, (pw - right) * sx, (ph - bottom) * sy)
+    if framing.mirror:
+        left, right = right, left
+    shown = (left * abs(sx), top * sy, (pw - right) * abs(sx), (ph - bottom) * sy)
     out = copy.deepcopy(document)
     out["clip"] = f"{document.get('clip', 'clip')} ({framing.name})"
     for frame in out.get("keyframes", {}).values():
         vehicles = []
         for vehicle in frame.get("vehicles", []):
-            x0, y0, x1, y1 = vehicle["box"]
-            box = [x0 * sx + dx, y0 * sy + dy, x1 * sx + dx, y1 * sy + dy]
+            box = framing.move_boxes(np.array([vehicle["box"]], np.float64), source)[0].tolist()
             clipped = [
                 max(box[0], shown[0]),
                 max(box[1], shown[1]),
@@ -165,13 +198,16 @@ def reframe_labels(
             vehicles.append(vehicle)
         frame["vehicles"] = vehicles
         lane = frame.get("lane") or {}
-        for side, points in lane.items():
+        # Points are pixel centres, half a pixel inside the edge coordinates the map is in.
+        for side, points in list(lane.items()):
             moved = {}
             for row, x in (points or {}).items():
-                y, nx = float(row) * sy + dy, float(x) * sx + dx
+                y, nx = float(row) * sy + dy, (float(x) + 0.5) * sx + dx - 0.5
                 if shown[1] <= y < shown[3] and 0 <= y < oh and 0 <= nx < ow:
                     moved[str(round(y))] = round(nx, 1)
             lane[side] = moved
+        if framing.mirror and lane:
+            frame["lane"] = {_OTHER_SIDE.get(side, side): points for side, points in lane.items()}
     return out
 
 
@@ -242,8 +278,6 @@ def distance_ratios(
     """Per vehicle and frame, its distance in the re-framed clip's record `frames` over the
     same vehicle's in the `reference` record of the clip as it is (boxes matched at `min_iou`
     once moved back to the source picture): 1 where the geometry holds under the re-framing."""
-    sx, sy, dx, dy = framing.affine(source)
-    back = np.array([sx, sy, sx, sy]), np.array([dx, dy, dx, dy])
     by_frame = {int(r["frame"]): r for r in reference}
     ratios: list[float] = []
     for record in frames:
@@ -252,7 +286,7 @@ def distance_ratios(
         framed = [v for v in record.get("vehicles", []) if v.get("distance_m")]
         if not seen or not framed:
             continue
-        a = (np.array([v["box"] for v in framed], np.float64) - back[1]) / back[0]
+        a = framing.unmove_boxes(np.array([v["box"] for v in framed], np.float64), source)
         b = np.array([v["box"] for v in seen], np.float64)
         overlap = iou_matrix(a, b)
         for i, j in enumerate(overlap.argmax(axis=1)):

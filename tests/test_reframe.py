@@ -28,6 +28,7 @@ from camera_cal import default_calibration_path, load_calibration
 # The issue's aim, pooled over the three clips (see the README's table).
 PRECISION = 0.95
 RECALL_DROP = 0.05
+MIRRORED_PRECISION = 0.9
 MEAN_IOU = 0.75
 LANE_WITHIN = 0.99
 DISTANCE_DRIFT = 0.05  # median distance of the same vehicles (and speed), re-framed over as it is
@@ -64,7 +65,10 @@ def test_labels_move_with_the_picture(framing: Framing) -> None:
     in_box = (xs < vehicle["box"][2] + 2) & (ys < vehicle["box"][3] + 2)
     found = [xs[in_box].min(), ys[in_box].min(), xs[in_box].max() + 1, ys[in_box].max() + 1]
     np.testing.assert_allclose(found, vehicle["box"], atol=1.5)
-    (row, x), *_ = keyframe["lane"]["left"].items()
+    # A mirrored picture's left line is the right one.
+    side = "right" if framing.mirror else "left"
+    assert not keyframe["lane"].get("left" if framing.mirror else "right")
+    (row, x), *_ = keyframe["lane"][side].items()
     assert moved[int(row), round(x)].max() > 127
     assert not vehicle["ignore"]
 
@@ -95,9 +99,9 @@ def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
 @pytest.mark.slow
 def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
     """The labelled clips re-framed (horizon 10 % up and down, a narrower view, 4:3, black side
-    bars, 960x540, 1920x1080, half and twice the frame rate) and run without calibration, as
-    footage of an unknown camera: pooled over the three clips, the vehicles, their distances,
-    the speed and the lane stay close to the clips as they are."""
+    bars, 960x540, 1920x1080, half and twice the frame rate, mirrored) and run without
+    calibration, as footage of an unknown camera: pooled over the three clips, the vehicles,
+    their distances, the speed and the lane stay close to the clips as they are."""
     clips = [
         (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
         for c in ("test_video", "project_cut_1", "project_cut_2")
@@ -110,7 +114,11 @@ def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
         if name != "narrower view":
             assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
             assert abs(row["speed_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
-        assert row["precision"] >= PRECISION, (name, row)
+        # Mirrored, the median barrier stands on the right, which the classifier never saw
+        # among its non-vehicles (the training set's crops of it are of the left): its aim
+        # is looser (README, Known weaknesses).
+        aim = MIRRORED_PRECISION if name == "mirrored" else PRECISION
+        assert row["precision"] >= aim, (name, row)
         assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
         assert row["mean_iou"] >= MEAN_IOU, (name, row)
         assert row["lane_within_20px"] >= LANE_WITHIN, (name, row)
