@@ -463,6 +463,13 @@ def train_command(
         int,
         typer.Option(help="Patch side in pixels: 64, or 32 for the model of the smallest windows."),
     ] = 64,
+    mirror: Annotated[
+        bool,
+        typer.Option(
+            "--mirror/--no-mirror",
+            help="Also train on each patch's mirror image (left- and right-hand traffic alike).",
+        ),
+    ] = False,
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
@@ -490,7 +497,9 @@ def train_command(
         patches,
         # Spatial bins of 4 x 4 pixels at either size.
         FeatureConfig(patch_size=patch, spatial_size=patch // 4),
-        cfg=TrainConfig(n_jobs=jobs) if c is None else TrainConfig(c_grid=(c,), n_jobs=jobs),
+        cfg=TrainConfig(n_jobs=jobs, mirror=mirror)
+        if c is None
+        else TrainConfig(c_grid=(c,), n_jobs=jobs, mirror=mirror),
         progress=progress,
         log=lambda m: typer.echo(m, err=True),
         extra_negatives=extra,

@@ -143,6 +143,28 @@ def test_training_on_a_small_subset(patches: PatchSet, tmp_path: Path) -> None:
     assert loaded.config == model.config
 
 
+def test_a_model_trained_on_mirror_images_too_scores_a_view_as_its_mirror(
+    patches: PatchSet,
+) -> None:
+    """With `mirror`, each patch also trains as its mirror image: the model scores a car seen
+    from behind-left as the same car from behind-right (traffic keeping left or right); one
+    trained on the patches as they are does not."""
+    groups = np.unique(patches.groups)[::2]
+    train = _subset(patches, groups, 300, seed=4)
+    probe = _subset(patches, np.unique(patches.groups)[1::2], 100, seed=5).images
+    gaps = {}
+    for mirror in (False, True):
+        model = train_model(
+            train, cfg=TrainConfig(c_grid=(1e-3,), folds=2, n_jobs=1, mirror=mirror)
+        )
+        x = extract_features(probe, model.config, n_jobs=1)
+        x_mirrored = extract_features(probe[:, :, ::-1], model.config, n_jobs=1)
+        gaps[mirror] = np.abs(model.decision_function(x) - model.decision_function(x_mirrored))
+        assert model.report["mirrored"] is mirror
+        assert model.report["n_vehicles"] + model.report["n_non_vehicles"] == len(train)
+    assert np.median(gaps[True]) < 0.01 < 0.1 < np.median(gaps[False])
+
+
 def test_shipped_model_on_a_fixed_subset(patches: PatchSet) -> None:
     model = load_model(default_model_path())
     subset = patches.subset(np.arange(0, len(patches), 20))

@@ -37,6 +37,10 @@ class TrainConfig:
     seed: int = 0
     n_jobs: int = 2
     max_iter: int = 5000
+    # Each patch also trains as its mirror image (in its group): a model that scores a view and
+    # its mirror image alike, for traffic keeping left as well as right (see the README for why
+    # the shipped models are not).
+    mirror: bool = False
 
 
 def _features_chunk(images: NDArray[np.uint8], config: FeatureConfig) -> NDArray[np.float32]:
@@ -163,21 +167,35 @@ def train_model(
     cfg = cfg if cfg is not None else TrainConfig()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    x = extract_features(patches.images, config, cfg.n_jobs, progress)
+    images = patches.images
     y = patches.labels.astype(np.int8)
     groups = patches.groups
     if len(extra_negatives):
-        x_extra = extract_features(np.stack(list(extra_negatives)), config, cfg.n_jobs)
-        x = np.concatenate([x, x_extra])
-        y = np.concatenate([y, np.zeros(len(x_extra), np.int8)])
-        groups = np.concatenate([groups, groups.max() + 1 + np.arange(len(x_extra)) // 30])
+        extra = np.stack(list(extra_negatives))
+        images = np.concatenate([images, extra])
+        y = np.concatenate([y, np.zeros(len(extra), np.int8)])
+        groups = np.concatenate([groups, groups.max() + 1 + np.arange(len(extra)) // 30])
+    x = extract_features(images, config, cfg.n_jobs, progress)
+    n = len(x)
+    # A mirrored patch joins its original's group: split, searched and scored with it; the
+    # accuracies are measured on originals alone.
+    if cfg.mirror:
+        x = np.concatenate([x, extract_features(images[:, :, ::-1], config, cfg.n_jobs)])
+        y, groups = np.concatenate([y, y]), np.concatenate([groups, groups])
+
+    def with_mirrors(index: NDArray[np.int64]) -> NDArray[np.int64]:
+        return np.concatenate([index, index + n]) if cfg.mirror else index
+
     timings["features_s"] = time.perf_counter() - t0
     log(f"features: {x.shape[0]} x {x.shape[1]} in {timings['features_s']:.1f} s")
 
     t0 = time.perf_counter()
     train, test = next(
-        GroupShuffleSplit(1, test_size=cfg.test_size, random_state=cfg.seed).split(x, y, groups)
+        GroupShuffleSplit(1, test_size=cfg.test_size, random_state=cfg.seed).split(
+            x[:n], y[:n], groups[:n]
+        )
     )
+    train = with_mirrors(train)
     best_c, cv_accuracy = search_c(x[train], y[train], groups[train], cfg)
     timings["search_s"] = time.perf_counter() - t0
     log(f"C search {cv_accuracy} -> C = {best_c:g} in {timings['search_s']:.1f} s")
@@ -186,8 +204,9 @@ def train_model(
     held_out = fit_calibrated(x[train], y[train], groups[train], best_c, cfg)
     grouped = scores(y[test], held_out.predict(x[test]))
     rtrain, rtest = train_test_split(
-        np.arange(len(y)), test_size=cfg.test_size, random_state=cfg.seed, stratify=y
+        np.arange(n), test_size=cfg.test_size, random_state=cfg.seed, stratify=y[:n]
     )
+    rtrain = with_mirrors(rtrain)
     plain = svm_pipeline(best_c, cfg.max_iter).fit(x[rtrain], y[rtrain])
     random_split = scores(y[rtest], plain.predict(x[rtest]))
     timings["evaluate_s"] = time.perf_counter() - t0
@@ -203,8 +222,9 @@ def train_model(
         "chosen_c": best_c,
         "cv_accuracy_by_c": cv_accuracy,
         "feature_length": config.length,
-        "n_vehicles": int((y == 1).sum()),
-        "n_non_vehicles": int((y == 0).sum()),
+        "n_vehicles": int((y[:n] == 1).sum()),
+        "n_non_vehicles": int((y[:n] == 0).sum()),
+        "mirrored": cfg.mirror,
         "n_hard_negatives": len(extra_negatives),
         "n_groups": len(np.unique(groups)),
         "platt": [float(sigmoid.a_), float(sigmoid.b_)],
