@@ -332,13 +332,19 @@ def test_boxes_reach_towards_the_vanishing_column_but_not_past_it_nor_at_the_sid
     assert reach_toward(boxes, 640.0, 0.0, live).tolist() == boxes.tolist()
 
 
-def test_a_box_crossing_the_picture_quickly_moves_on_instead() -> None:
+def test_a_box_crossing_the_picture_quickly_reaches_the_way_it_moves() -> None:
     # An oncoming car left of the column moving left 20 px a frame (a fifth of its width): its
-    # heat trails it, so its box moves on by half a frame's motion and does not reach right.
+    # heat trails it, so its box reaches half a frame's motion left, not right; one moving right
+    # as fast reaches right; a slow one reaches the column.
     live = (0, 0, 1280, 720)
-    boxes = np.array([[300.0, 400, 400, 470], [800.0, 400, 900, 470]])
-    moved = reach_toward(boxes, 640.0, 0.08, live, motion=np.array([-20.0, 2.0]), fast=0.12)
-    assert moved.tolist() == [[290.0, 400, 390, 470], [792.0, 400, 900, 470]]
+    boxes = np.array([[300.0, 400, 400, 470], [300.0, 400, 400, 470], [800.0, 400, 900, 470]])
+    motion = np.array([-20.0, 20.0, 2.0])
+    moved = reach_toward(boxes, 640.0, 0.08, live, motion=motion, fast=0.12, lead=0.5)
+    assert moved.tolist() == [
+        [290.0, 400, 400, 470],
+        [300.0, 400, 410, 470],
+        [792.0, 400, 900, 470],
+    ]
 
 
 def test_box_bottoms_move_to_where_the_shadow_meets_the_road() -> None:

@@ -107,8 +107,8 @@ class DetectorConfig:
     # A box reaches this share of its width further towards the road's vanishing column: a car
     # beside the camera's axis shows its rear (or front) and the side that faces the axis, and
     # the windows, trained mostly on rear views, heat the end and stop short of that side; a car
-    # whose box moves more than `fast_share` of its width a frame (oncoming traffic) reaches the
-    # way it moves instead, as its heat trails it (see vehicles/refine.py).
+    # whose box moves more than `fast_share` of its width a frame (oncoming traffic) reaches half
+    # its motion the way it moves instead, as its heat trails it (see vehicles/refine.py).
     side_reach: float = 0.08
     fast_share: float = 0.12
     min_box: float = 0.025  # smallest box side reported / frame height

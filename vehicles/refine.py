@@ -63,23 +63,22 @@ def reach_toward(
     """The boxes, each reaching `share` of its width further towards `column` (the road's
     vanishing column, which the side of a car beside the camera's axis faces), but not past it:
     a box astride it (no side shows) is kept. A box whose `motion` (its centre's px a frame) is
-    over `fast` of its width (oncoming traffic) moves on by `lead` times its motion instead: its
-    heat, from the last frames, trails it. A box within `tolerance` px of a side of the `live`
-    box keeps its width (it is measured there by another rule). Boxes stay in the `live` box."""
+    over `fast` of its width (oncoming traffic) reaches `lead` times its motion the way it moves
+    instead: its heat, from the last frames, trails it. A box within `tolerance` px of a side of
+    the `live` box keeps its width (it is measured there by another rule); none reaches past it."""
     out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
     if not len(out):
         return out
     x0, x1 = out[:, 0].copy(), out[:, 2].copy()
-    reach = share * (x1 - x0)
-    inside = (x0 > live[0] + tolerance) & (x1 < live[2] - tolerance)
     moves = np.zeros(len(out)) if motion is None else np.asarray(motion, np.float64)
-    quick = inside & (np.abs(moves) > fast * (x1 - x0))
-    left = inside & ~quick & (x0 >= column)
-    right = inside & ~quick & (x1 <= column)
-    out[left, 0] = np.maximum(x0[left] - reach[left], column)
-    out[right, 2] = np.minimum(x1[right] + reach[right], column)
-    out[quick, 0] += lead * moves[quick]
-    out[quick, 2] += lead * moves[quick]
-    out[:, 0] = np.clip(out[:, 0], live[0], live[2] - 1)
-    out[:, 2] = np.clip(out[:, 2], out[:, 0] + 1, live[2])
+    quick = np.abs(moves) > fast * (x1 - x0)
+    inside = (x0 > live[0] + tolerance) & (x1 < live[2] - tolerance)
+    reach = np.where(quick, lead * np.abs(moves), share * (x1 - x0))
+    # Towards the column, not past it; or the way a quick box moves.
+    left = inside & np.where(quick, moves < 0, x0 >= column)
+    right = inside & np.where(quick, moves > 0, x1 <= column)
+    stop_left = np.where(quick, live[0], column)
+    stop_right = np.where(quick, live[2], column)
+    out[left, 0] = np.maximum(x0[left] - reach[left], stop_left[left])
+    out[right, 2] = np.minimum(x1[right] + reach[right], stop_right[right])
     return out
