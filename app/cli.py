@@ -484,7 +484,7 @@ def train_command(
         raise InputError(f"--patch {patch} is not a model size; give 64 or 32")
     patches = load_patches(data)
     extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
-    bar = Progress(len(patches), label="features", unit="patches/s")
+    bar = Progress(len(patches) + len(extra), label="features", unit="patches/s")
 
     def progress(done: int, total: int) -> None:
         bar.update(done - bar.count)
