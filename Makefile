@@ -26,10 +26,12 @@ calibrate: data
 # are there (their first 60 %; the rest measures the result) by the model trained without them.
 WILD := $(SHARED)/wild
 NEGATIVE_CLIPS := $(wildcard $(WILD)/rural_2lane_wet.mp4 $(WILD)/night_highway_istock.mp4)
-# The 32 px model reads the smallest windows (cars 3-4 % of the height), with its own verifier.
+# The 32 px model reads the smallest windows (cars 3-4 % of the height), with its own verifier;
+# the low-resolution model reads pictures under 540 rows (trained also on compressed copies).
 train: data
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/default.npz
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/small.npz --patch 32
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/lowres.npz --degrade
 ifneq ($(NEGATIVE_CLIPS),)
 	$(BIN)/roadview mine $(NEGATIVE_CLIPS) --out output/hard_negatives --every 1
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/verifier.npz \

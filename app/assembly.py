@@ -28,13 +28,16 @@ def build_stages(
     verifier: Path | None = None,
     verify: bool = True,
     small: bool = True,
+    lowres: bool = True,
 ) -> Stages:
     """The stages that are switched on.
 
     For a still there is no history: every band is searched and nothing waits for confirmation.
     A `classifier` already loaded is used instead of loading `model`. The vehicle stage's windows
     are also checked by the `verifier` model (the shipped one by default) unless `verify` is off.
-    The smallest windows are read by the shipped 32 px model unless `small` is off.
+    The smallest windows are read by the shipped 32 px model unless `small` is off. With the
+    shipped model (no `model` nor `classifier` given), pictures of few rows are read by the
+    shipped low-resolution model (see `DetectorConfig.lowres_rows`) unless `lowres` is off.
     """
     lane_stage = vehicle_stage = None
     if lanes:
@@ -44,8 +47,14 @@ def build_stages(
     if vehicles:
         from vehicles.config import DetectorConfig
         from vehicles.detector import Scorer, VehicleDetector
-        from vehicles.model import default_small_paths, default_verifier_path, load_model
+        from vehicles.model import (
+            default_lowres_path,
+            default_small_paths,
+            default_verifier_path,
+            load_model,
+        )
 
+        shipped = model is None and classifier is None
         classifier = classifier if classifier is not None else load_model(model)
         config = DetectorConfig().for_still() if still else DetectorConfig()
         checker = load_model(verifier or default_verifier_path()) if verify else None
@@ -55,5 +64,8 @@ def build_stages(
             if small
             else None
         )
-        vehicle_stage = VehicleDetector(classifier, config, keep_debug, checker, twin)
+        coarse = load_model(default_lowres_path()) if shipped and lowres else None
+        vehicle_stage = VehicleDetector(
+            classifier, config, keep_debug, checker, twin, lowres=coarse
+        )
     return Stages(lane_stage, vehicle_stage)

@@ -470,6 +470,13 @@ def train_command(
             help="Also train on each patch's mirror image (left- and right-hand traffic alike).",
         ),
     ] = False,
+    degrade: Annotated[
+        bool,
+        typer.Option(
+            "--degrade/--no-degrade",
+            help="Also train on each patch as small compressed footage shows it (360-480 rows).",
+        ),
+    ] = False,
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
@@ -497,9 +504,9 @@ def train_command(
         patches,
         # Spatial bins of 4 x 4 pixels at either size.
         FeatureConfig(patch_size=patch, spatial_size=patch // 4),
-        cfg=TrainConfig(n_jobs=jobs, mirror=mirror)
+        cfg=TrainConfig(n_jobs=jobs, mirror=mirror, degrade=degrade)
         if c is None
-        else TrainConfig(c_grid=(c,), n_jobs=jobs, mirror=mirror),
+        else TrainConfig(c_grid=(c,), n_jobs=jobs, mirror=mirror, degrade=degrade),
         progress=progress,
         log=lambda m: typer.echo(m, err=True),
         extra_negatives=extra,
@@ -535,7 +542,9 @@ def mine_command(
         if not video.is_file():
             raise InputError(f"{video} does not exist; give clips without vehicles to mine")
     # The 64 px model's false alarms, as mined for the shipped verifiers (both learn them).
-    detector = build_stages(lanes=False, model=model, verify=False, small=False).vehicles
+    detector = build_stages(
+        lanes=False, model=model, verify=False, small=False, lowres=False
+    ).vehicles
     assert detector is not None
     total = mine_clips(videos, detector, out, share, every, log=typer.echo)
     typer.echo(f"wrote {total} patches to {out}")

@@ -44,7 +44,7 @@ def mine_clip(
         if not hits:
             continue
         boxes = np.concatenate([hit.boxes for hit in hits])
-        proba = detector.window_terms(hits)[0]
+        proba = detector.window_terms(hits, view)[0]
         chosen = surest_apart(boxes, proba, min_probability, per_frame)
         for k, patch in enumerate(window_patches(frame, boxes[chosen])):
             name = out / f"{video.stem}_{index:05d}_{k:02d}.png"

@@ -8,10 +8,12 @@ import cv2
 import numpy as np
 import pytest
 
+from vehicles.augment import Degradation, degrade_patch, degraded
 from vehicles.dataset import PatchSet, group_key, load_patches
 from vehicles.features import FeatureConfig, feature_maps, patch_features
 from vehicles.model import (
     ModelError,
+    default_lowres_path,
     default_model_path,
     default_small_paths,
     load_model,
@@ -253,3 +255,63 @@ def test_exported_model_gives_scikit_learns_probabilities() -> None:
     np.testing.assert_allclose(
         model.probability(model.decision_function(x[:50])), expected, atol=1e-7
     )
+
+
+def test_a_degraded_patch_loses_detail_and_colour_resolution_as_small_footage_does() -> None:
+    """`degrade_patch` keeps the patch's size; shrunk to 20 px its fine texture is mostly gone,
+    and even at full size and high quality a colour pattern one pixel fine is averaged away
+    (4:2:0), as in H.264 footage, while the brightness stays."""
+    rng = np.random.default_rng(0)
+    texture = rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    small = degrade_patch(texture, side=20, quality=85)
+    assert small.shape == texture.shape and small.dtype == np.uint8
+
+    def detail(image: np.ndarray) -> float:
+        grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float64)
+        return float(np.abs(cv2.Laplacian(grey, cv2.CV_64F)).mean())
+
+    assert detail(small) < 0.3 * detail(texture)
+    ycrcb = np.full((64, 64, 3), 128, np.uint8)
+    ycrcb[:, ::2, 1], ycrcb[:, 1::2, 1] = 100, 156  # red-difference stripes one pixel wide
+    stripes = cv2.cvtColor(ycrcb, cv2.COLOR_YCrCb2RGB)
+    kept = cv2.cvtColor(degrade_patch(stripes, side=64, quality=95), cv2.COLOR_RGB2YCrCb)
+    column_cr = kept[8:-8, 8:-8, 1].astype(np.float64).mean(axis=0)
+    assert np.abs(np.diff(column_cr)).mean() < 0.2 * 56
+    assert abs(kept[:, :, 0].astype(np.float64).mean() - 128) < 4
+
+
+def test_a_model_trained_on_degraded_copies_too_reads_small_compressed_cars(
+    patches: PatchSet,
+) -> None:
+    """With `degrade`, each patch also trains as small compressed footage shows it: on patches
+    of held-out groups degraded so (other draws), such a model is more accurate than one trained
+    on the patches as they are, and scores them closer to their sharp originals."""
+    groups = np.unique(patches.groups)[::2]
+    train = _subset(patches, groups, 300, seed=4)
+    probe = _subset(patches, np.unique(patches.groups)[1::2], 150, seed=5)
+    worse = degraded(probe.images, Degradation(min_quality=30, max_quality=50, seed=9))
+    accuracy, gaps = {}, {}
+    for degrade in (False, True):
+        model = train_model(
+            train, cfg=TrainConfig(c_grid=(1e-3,), folds=2, n_jobs=1, degrade=degrade)
+        )
+        x = extract_features(probe.images, model.config, n_jobs=1)
+        x_worse = extract_features(worse, model.config, n_jobs=1)
+        accuracy[degrade] = float((model.predict(x_worse) == probe.labels).mean())
+        gaps[degrade] = float(
+            np.median(np.abs(model.decision_function(x) - model.decision_function(x_worse)))
+        )
+        assert model.report["degraded"] is degrade
+    assert accuracy[True] >= accuracy[False] + 0.05, accuracy
+    assert gaps[True] < 0.6 * gaps[False], gaps
+
+
+def test_shipped_low_resolution_model(patches: PatchSet) -> None:
+    """The model for pictures of few rows was trained also on degraded copies, and is as
+    accurate on the sharp patches of held-out groups as the issue asks (98.5 %)."""
+    model = load_model(default_lowres_path())
+    assert model.report["degraded"] is True and model.config == load_model().config
+    subset = patches.subset(np.arange(0, len(patches), 20))
+    x = extract_features(subset.images, model.config, n_jobs=1)
+    assert (model.predict(x) == subset.labels).mean() >= 0.98
+    assert model.report["grouped_split"]["accuracy"] >= 0.985

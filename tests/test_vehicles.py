@@ -22,6 +22,7 @@ from vehicles.features import patch_features
 from vehicles.heatmap import Heatmap
 from vehicles.model import (
     VehicleModel,
+    default_lowres_path,
     default_model_path,
     default_small_paths,
     default_verifier_path,
@@ -123,14 +124,15 @@ def _small() -> Scorer:
 
 @pytest.mark.parametrize(
     ("rows", "size", "least", "gain"),
-    [(720, 22, 12, 8), (720, 28, 12, 6), (540, 16, 10, 8), (480, 15, 10, 8)],
+    [(720, 22, 12, 8), (720, 28, 12, 6), (540, 16, 10, 8), (480, 15, 10, 8), (360, 11, 8, 8)],
 )
 def test_cars_3_to_4_percent_tall_are_found_by_the_small_model(
     model: VehicleModel, data_dir: Path, rows: int, size: int, least: int, gain: int
 ) -> None:
     """Twenty cars of the training set shrunk to 3-4 % of the height (22 and 28 px at 720 rows,
-    16 at 540, 15 at 480) and pasted where a car that size meets the road: the 32 px model's
-    windows of 24 px at 720 rows find most, the 64 px model's bands alone hardly any. (The model
+    16 at 540, 15 at 480, 11 at 360) and pasted where a car that size meets the road: the 32 px
+    model's windows of 24 px at 720 rows (12 at 360) find most (at 360 rows about half), the
+    64 px model's bands alone hardly any. (The model
     knows these cars: this tests the search, its band, heat, part rule and smallest box; the
     clips measure the classifier.)"""
     with zipfile.ZipFile(data_dir / "vehicles.zip") as archive:
@@ -200,14 +202,15 @@ def test_a_camera_mounted_higher_finds_cars_when_told_its_height(
         assert found[None] <= 2 and found[1.236 * factor] >= least, (size, found)
 
 
-def test_the_small_band_is_searched_only_where_its_windows_have_16_pixels(
+def test_the_small_band_is_searched_only_where_its_windows_have_11_pixels(
     model: VehicleModel, data_dir: Path
 ) -> None:
-    """24 px windows at 720 rows are 16 px at 480 and 12 px at 360: too few pixels for 8 px
-    cells (such windows boxed dark road at night), so that band is not searched there."""
+    """24 px windows at 720 rows are 12 px at 360 and 8 px at 240: too few pixels for the
+    32 px model's 8 px cells (a car 3 % of 240 rows is 7 px), so that band is not searched
+    there."""
     frame = _rgb(data_dir / "test_images" / "test1.jpg")
     detector = VehicleDetector(model, small=_small())
-    for size, searched in (((1280, 720), True), ((854, 480), True), ((640, 360), False)):
+    for size, searched in (((1280, 720), True), ((640, 360), True), ((427, 240), False)):
         scaled = np.ascontiguousarray(cv2.resize(frame, size, interpolation=cv2.INTER_AREA))
         hits = detector.search(scaled, view=detector.view(size))
         assert any(hit.band.patch == 32 for hit in hits) == searched
@@ -596,3 +599,47 @@ def test_a_car_is_shown_and_dropped_after_the_same_time_at_any_frame_rate(
     assert kept is not None and abs(kept / fps - at_25.heat.history / 25) <= half_frame
     detector.reset()  # a new clip at the same rate
     assert detector.heatmap.frames.maxlen == round(at_25.heat.history * fps / 25)
+
+
+def test_pictures_of_few_rows_are_read_by_the_low_resolution_model(model: VehicleModel) -> None:
+    """Under `lowres_rows` (540 rows of scale height) the 64 px bands are scored by the
+    low-resolution model, checked by the same verifier; from 540 rows on by the model; the
+    32 px bands keep their own; without a low-resolution model, the model reads every size."""
+    lowres = load_model(default_lowres_path())
+    verifier = load_model(default_verifier_path())
+    small = _small()
+    detector = VehicleDetector(model, verifier=verifier, small=small, lowres=lowres)
+    for size, expected in (((640, 360), lowres), ((854, 480), lowres), ((960, 540), model)):
+        scorers = detector.scorers_for(detector.view(size))
+        assert scorers[64].model is expected and scorers[64].verifier is verifier, size
+        assert scorers[32] is small
+    plain = VehicleDetector(model, verifier=verifier)
+    assert plain.scorers_for(plain.view((640, 360)))[64].model is model
+
+
+def test_small_compressed_footage_is_read_by_the_low_resolution_model(
+    data_dir: Path, tmp_path: Path
+) -> None:
+    """project_cut_1 shrunk to 640x360 and encoded as footage is (colour at half resolution):
+    the model trained on sharp crops boxes the white car entering at the right a third of its
+    width and misses most cars; the low-resolution model, trained also on compressed copies,
+    finds more than twice as many, each where it is."""
+    from app.reframe import Framing, framing_scores
+
+    video, labels = (
+        data_dir / "videos" / "project_cut_1.mp4",
+        data_dir / "labels" / "project_cut_1.json",
+    )
+    calibration = load_calibration(default_calibration_path())
+    framing = Framing("640x360", size=(640, 360))
+    for name in ("lowres", "sharp"):
+        (tmp_path / name).mkdir()
+    scores = {
+        name: framing_scores(video, labels, framing, tmp_path / name, calibration, classifier)[
+            "vehicles"
+        ]["iou_0.5"]
+        for name, classifier in (("lowres", None), ("sharp", load_model(default_model_path())))
+    }
+    lowres, sharp = scores["lowres"], scores["sharp"]
+    assert lowres["precision"] >= 0.95, scores
+    assert lowres["true_positives"] >= 2 * sharp["true_positives"], scores

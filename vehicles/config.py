@@ -38,13 +38,14 @@ def _default_bands() -> tuple[Band, ...]:
         Band(window=96 / 720, top=388 / 720, bottom=548 / 720, left=-0.04, right=1.04),
         Band(window=128 / 720, top=384 / 720, bottom=592 / 720, left=-0.05, right=1.05),
         Band(window=192 / 720, top=380 / 720, bottom=668 / 720, left=-0.08, right=1.08),
-        # Cars 3-4 % of the height, far ahead or oncoming, where a 24 px window still has 16 px.
+        # Cars 3-4 % of the height, far ahead or oncoming, where a 24 px window still has 11 px
+        # (from 360 rows: the night clip, where 12 px windows once boxed dark road, has no box).
         Band(
             window=24 / 720,
             top=408 / 720,
             bottom=452 / 720,
             right=0.75,
-            min_window_px=16.0,
+            min_window_px=11.0,
             part_ratio=2.0,
             patch=32,
         ),
@@ -88,6 +89,12 @@ class DetectorConfig:
     # The bands were placed for the horizon at this fraction of the height (the shipped camera's
     # 420.8 of 720 rows); with another horizon they move with it.
     reference_horizon: float = 420.8 / 720
+    # Pictures under this many rows (the view's scale height) are read by the low-resolution
+    # model, when there is one, instead of the model: at such sizes a window sees the footage's
+    # colour at half resolution and its compression blocks at its own scale (at 720 rows it is
+    # mostly shrunk twofold or more, which averages them away), and the model, trained on sharp
+    # crops, misses cars there (see the README).
+    lowres_rows: float = 540.0
     min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what

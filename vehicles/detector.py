@@ -105,6 +105,7 @@ class VehicleDetector:
         keep_debug: bool = False,
         verifier: VehicleModel | None = None,
         small: Scorer | None = None,
+        lowres: VehicleModel | None = None,
     ) -> None:
         self.model = model
         self.config = config if config is not None else DetectorConfig()
@@ -112,6 +113,13 @@ class VehicleDetector:
         self.scorers = {model.config.patch_size: Scorer.of(model, verifier)}
         if small is not None:
             self.scorers.setdefault(small.model.config.patch_size, small)
+        # Pictures of fewer rows than `lowres_rows` are read by `lowres` in its patch size's
+        # bands, checked by the same verifier.
+        self.lowres_scorers = (
+            self.scorers
+            if lowres is None
+            else {**self.scorers, lowres.config.patch_size: Scorer.of(lowres, verifier)}
+        )
         self.keep_debug = keep_debug
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
         self.heatmap, self.tracker = self._fresh_history()
@@ -153,6 +161,10 @@ class VehicleDetector:
             ground_scale,
         )
 
+    def scorers_for(self, view: View) -> dict[int, Scorer]:
+        """The scorer of each band's patch size for pictures seen as `view`."""
+        return self.lowres_scorers if view.scale_height < self.config.lowres_rows else self.scorers
+
     def search(
         self, frame: NDArray[np.uint8], parity: int | None = None, view: View | None = None
     ) -> tuple[BandHits, ...]:
@@ -161,22 +173,23 @@ class VehicleDetector:
         if parity is not None:
             bands = bands[parity::2]
         where = view or self.view((frame.shape[1], frame.shape[0]))
+        scorers = self.scorers_for(where)
         found = (
             search_band(
                 frame,
                 band,
-                self.scorers[band.patch].weights,
+                scorers[band.patch].weights,
                 where,
                 self.config.reference_horizon,
-                self.scorers[band.patch].verifier_weights,
+                scorers[band.patch].verifier_weights,
             )
             for band in bands
-            if band.patch in self.scorers
+            if band.patch in scorers
         )
         return tuple(hit for hit in found if hit is not None)
 
     def window_terms(
-        self, hits: Sequence[BandHits]
+        self, hits: Sequence[BandHits], view: View
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """For every window of `hits`, in order: P(vehicle) by its band's model, its verifier's
         P(vehicle) (1 where that model has none), and the weight of its heat. A window steps one
@@ -184,9 +197,10 @@ class VehicleDetector:
         eighth, so fewer of them overlap a small car: each of its hits heats 8 / 4 = 2 times as
         much (the square, 4, spoilt the boxes of 34-40 px cars; tried)."""
         cells = self.model.config.cells_per_patch
+        scorers = self.scorers_for(view)
         terms: list[tuple[NDArray[np.float64], ...]] = [(np.zeros(0),) * 3]
         for hit in hits:
-            scorer = self.scorers[hit.band.patch]
+            scorer = scorers[hit.band.patch]
             n = len(hit.decisions)
             checked = (
                 np.ones(n)
@@ -221,7 +235,7 @@ class VehicleDetector:
         self.frame_index += 1
         hits = self.search(frame, parity, view)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        proba, checked, density = self.window_terms(hits)
+        proba, checked, density = self.window_terms(hits, view)
         strong = proba >= cfg.min_probability
         sure = checked >= cfg.min_verified
         vetoed = boxes[strong & ~sure]

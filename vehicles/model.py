@@ -38,6 +38,12 @@ def default_verifier_path() -> Path:
     return Path(__file__).with_name("models") / "verifier.npz"
 
 
+def default_lowres_path() -> Path:
+    """The committed model for footage of few rows: trained also on each patch as such footage
+    shows it (colour at half resolution, block compression; see `make train`)."""
+    return Path(__file__).with_name("models") / "lowres.npz"
+
+
 def default_small_paths() -> tuple[Path, Path]:
     """The committed 32 px model for the smallest windows, and its verifier (see `make train`)."""
     folder = Path(__file__).with_name("models")

@@ -20,6 +20,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
 
+from vehicles.augment import degraded, mirrored
 from vehicles.dataset import PatchSet
 from vehicles.features import FeatureConfig, patch_features
 from vehicles.model import VehicleModel
@@ -41,6 +42,9 @@ class TrainConfig:
     # its mirror image alike, for traffic keeping left as well as right (see the README for why
     # the shipped models are not).
     mirror: bool = False
+    # Each patch also trains as a small, compressed video frame shows it (`vehicles.augment`):
+    # colour at half resolution and block compression, as in footage of 360-480 rows.
+    degrade: bool = False
 
 
 def _features_chunk(images: NDArray[np.uint8], config: FeatureConfig) -> NDArray[np.float32]:
@@ -177,14 +181,15 @@ def train_model(
         groups = np.concatenate([groups, groups.max() + 1 + np.arange(len(extra)) // 30])
     x = extract_features(images, config, cfg.n_jobs, progress)
     n = len(x)
-    # A mirrored patch joins its original's group: split, searched and scored with it; the
-    # accuracies are measured on originals alone.
-    if cfg.mirror:
-        x = np.concatenate([x, extract_features(images[:, :, ::-1], config, cfg.n_jobs)])
-        y, groups = np.concatenate([y, y]), np.concatenate([groups, groups])
+    # A copy (mirrored, degraded) joins its original's group: split, searched and scored with
+    # it; the accuracies are measured on originals alone.
+    copies = [make for wanted, make in ((cfg.mirror, mirrored), (cfg.degrade, degraded)) if wanted]
+    for make in copies:
+        x = np.concatenate([x, extract_features(make(images), config, cfg.n_jobs)])
+    y, groups = np.tile(y, 1 + len(copies)), np.tile(groups, 1 + len(copies))
 
-    def with_mirrors(index: NDArray[np.int64]) -> NDArray[np.int64]:
-        return np.concatenate([index, index + n]) if cfg.mirror else index
+    def with_copies(index: NDArray[np.int64]) -> NDArray[np.int64]:
+        return np.concatenate([index + k * n for k in range(1 + len(copies))])
 
     timings["features_s"] = time.perf_counter() - t0
     log(f"features: {x.shape[0]} x {x.shape[1]} in {timings['features_s']:.1f} s")
@@ -195,7 +200,7 @@ def train_model(
             x[:n], y[:n], groups[:n]
         )
     )
-    train = with_mirrors(train)
+    train = with_copies(train)
     best_c, cv_accuracy = search_c(x[train], y[train], groups[train], cfg)
     timings["search_s"] = time.perf_counter() - t0
     log(f"C search {cv_accuracy} -> C = {best_c:g} in {timings['search_s']:.1f} s")
@@ -206,7 +211,7 @@ def train_model(
     rtrain, rtest = train_test_split(
         np.arange(n), test_size=cfg.test_size, random_state=cfg.seed, stratify=y[:n]
     )
-    rtrain = with_mirrors(rtrain)
+    rtrain = with_copies(rtrain)
     plain = svm_pipeline(best_c, cfg.max_iter).fit(x[rtrain], y[rtrain])
     random_split = scores(y[rtest], plain.predict(x[rtest]))
     timings["evaluate_s"] = time.perf_counter() - t0
@@ -225,6 +230,7 @@ def train_model(
         "n_vehicles": int((y[:n] == 1).sum()),
         "n_non_vehicles": int((y[:n] == 0).sum()),
         "mirrored": cfg.mirror,
+        "degraded": cfg.degrade,
         "n_hard_negatives": len(extra_negatives),
         "n_groups": len(np.unique(groups)),
         "platt": [float(sigmoid.a_), float(sigmoid.b_)],
@@ -255,6 +261,9 @@ def format_training_report(report: dict[str, Any]) -> str:
         f"{report['n_non_vehicles']} non-vehicles ({report['n_hard_negatives']} hard "
         f"negatives) in {report['n_groups']} groups"
     )
+    copies = [name for name in ("mirrored", "degraded") if report.get(name)]
+    if copies:
+        lines.append("each also trained " + " and ".join(copies) + ", in its group")
     t = report["timings_s"]
     lines.append("time: " + ", ".join(f"{k.removesuffix('_s')} {v:.1f} s" for k, v in t.items()))
     return "\n".join(lines)
