@@ -116,8 +116,9 @@ class Framing:
 def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     """The framings of issue #15 for a `source`-sized clip: as it is, horizon 10 % of the height
     higher (crop the top) and lower (pad the top, crop the bottom), a narrower field of view (the
-    middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes, half and twice
-    the frame rate, and mirrored (traffic keeping left, as in the UK, India or Japan)."""
+    middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes and half the size
+    (many phones' and dashcams' small copies), half and twice the frame rate, and mirrored
+    (traffic keeping left, as in the UK, India or Japan)."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)
@@ -131,6 +132,7 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("side bars", crop=(side, 0, w - side, h), pad=(side, 0, side, 0)),
         Framing("960x540", size=(round(w * 0.75), round(h * 0.75))),
         Framing("1920x1080", size=(round(w * 1.5), round(h * 1.5))),
+        Framing("640x360", size=(round(w * 0.5), round(h * 0.5))),
         Framing("half frame rate", rate=0.5),
         Framing("twice the frame rate", rate=2.0),
         Framing("mirrored", mirror=True),
