@@ -14,6 +14,7 @@ import pytest
 
 from app.evaluate import evaluate, load_labels, load_labels_document
 from tests.helpers import process_clip
+from vehicles.model import default_model_path
 
 LABELS = Path(__file__).with_name("labels")
 
@@ -58,10 +59,21 @@ def test_la_freeway_the_car_ahead_is_boxed(wild_dir: Path, tmp_path: Path) -> No
     """Another camera (854x480, a mirror in its corner, glare on the windscreen) in dense
     traffic. The SUV ahead in the next lane, seen from behind, is boxed in most frames; the
     clip's other required cars are not (an SUV beside us seen from the side, cut by the frame's
-    edge, and a car seen only through the glare's reflection), which the README reports."""
+    edge, and a car seen only through the glare's reflection), which the README reports. Under
+    540 rows the low-resolution model reads the picture: most boxes are cars, where the model
+    of sharp crops (given as --model, it reads every size) put most on the mirror and glare."""
     clip = wild_dir / "la_freeway_minidashcam_2.mp4"
-    rows = process_clip(clip, tmp_path, "--no-lanes", "--calibration", "none", "--end", "5.5")
+    options = ("--no-lanes", "--calibration", "none", "--end", "5.5")
+    for name in ("lowres", "sharp"):
+        (tmp_path / name).mkdir()
+    rows = process_clip(clip, tmp_path / "lowres", *options)
     document = json.loads((LABELS / f"{clip.stem}.json").read_text())
     ahead = evaluate(load_labels_document(_only(document, 2)), rows)["vehicles"]["iou_0.5"]
-    assert ahead["recall"] >= 0.6
+    assert ahead["recall"] >= 0.75
     assert ahead["mean_iou"] >= 0.6
+    every = evaluate(load_labels_document(document), rows)["vehicles"]["iou_0.5"]
+    sharp_rows = process_clip(
+        clip, tmp_path / "sharp", *options, "--model", str(default_model_path())
+    )
+    sharp = evaluate(load_labels_document(document), sharp_rows)["vehicles"]["iou_0.5"]
+    assert every["precision"] >= 0.8 > 0.5 > sharp["precision"], (every, sharp)
