@@ -504,9 +504,13 @@ def train_command(
         patches,
         # Spatial bins of 4 x 4 pixels at either size.
         FeatureConfig(patch_size=patch, spatial_size=patch // 4),
-        cfg=TrainConfig(n_jobs=jobs, mirror=mirror, degrade=degrade)
-        if c is None
-        else TrainConfig(c_grid=(c,), n_jobs=jobs, mirror=mirror, degrade=degrade),
+        cfg=TrainConfig(
+            n_jobs=jobs,
+            mirror=mirror,
+            degrade=degrade,
+            # A given C is the whole grid: no search.
+            c_grid=TrainConfig.c_grid if c is None else (c,),
+        ),
         progress=progress,
         log=lambda m: typer.echo(m, err=True),
         extra_negatives=extra,
