@@ -52,18 +52,12 @@ def degrade_patch(image: NDArray[np.uint8], side: int, quality: int) -> NDArray[
 
 def degraded(images: NDArray[np.uint8], config: Degradation | None = None) -> NDArray[np.uint8]:
     """Each (n, h, w, 3) patch degraded with its own side and quality, drawn reproducibly."""
+    if not len(images):
+        return images.copy()
     cfg = config if config is not None else Degradation()
     rng = np.random.default_rng(cfg.seed)
     width = images.shape[2]
     sides = np.round(rng.uniform(cfg.min_side, cfg.max_side, len(images)) * width / 64).astype(int)
     qualities = rng.integers(cfg.min_quality, cfg.max_quality + 1, len(images))
-    return (
-        np.stack(
-            [
-                degrade_patch(im, int(s), int(q))
-                for im, s, q in zip(images, sides, qualities, strict=True)
-            ]
-        )
-        if len(images)
-        else images.copy()
-    )
+    drawn = zip(images, sides, qualities, strict=True)
+    return np.stack([degrade_patch(im, int(s), int(q)) for im, s, q in drawn])
