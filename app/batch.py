@@ -55,6 +55,7 @@ class BatchOptions:
     calibration_required: bool = True
     model: str | None = None  # None: the shipped model
     camera_height_m: float | None = None  # the cameras' height over the road (see `process`)
+    keep_left: bool = False  # the footage's traffic keeps left (see `process --traffic`)
 
 
 @dataclass(frozen=True)
@@ -198,6 +199,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         vehicles_in_worker=False,
         calibration_required=options.calibration_required,
         camera_height_m=options.camera_height_m,
+        keep_left=options.keep_left,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]

@@ -65,6 +65,25 @@ CameraHeightOption = Annotated[
     ),
 ]
 
+TrafficOption = Annotated[
+    str,
+    typer.Option(
+        "--traffic",
+        metavar="right|left",
+        help="The side of the road traffic keeps to: 'left' in the UK, Ireland, India, Japan, "
+        "Australia (the vehicle search, tuned on traffic keeping right, sees the frames "
+        "mirrored).",
+    ),
+]
+
+
+def _keep_left(traffic: str) -> bool:
+    """Whether `--traffic` says traffic keeps left; anything but right or left is refused."""
+    side = traffic.strip().lower()
+    if side not in ("right", "left"):
+        raise InputError(f"--traffic {traffic} is not a side; give right or left")
+    return side == "left"
+
 
 @cli.callback()
 def _options(
@@ -232,6 +251,7 @@ def process_command(
     insets: Annotated[bool, typer.Option(help="Add bird's-eye and heat-map insets.")] = False,
     horizon: HorizonOption = None,
     camera_height: CameraHeightOption = None,
+    traffic: TrafficOption = "right",
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -241,6 +261,7 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
+    keep_left = _keep_left(traffic)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
     cal = _calibration(calibration)
@@ -260,6 +281,7 @@ def process_command(
             log=lambda m: typer.echo(m, err=True),
             horizon_y=horizon,
             camera_height_m=camera_height,
+            keep_left=keep_left,
         )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
@@ -277,6 +299,7 @@ def process_command(
             log=lambda m: typer.echo(m, err=True),
             calibration_required=_named(calibration),
             camera_height_m=camera_height,
+            keep_left=keep_left,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -309,13 +332,14 @@ def batch_command(
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
     model: ModelOption = None,
     camera_height: CameraHeightOption = None,
+    traffic: TrafficOption = "right",
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
     from app.drivers import check_camera_height
 
     check_camera_height(camera_height)
-
+    keep_left = _keep_left(traffic)
     entries = find_inputs(inputs)
     if not entries:
         raise InputError("no video files found in the inputs; pass videos, folders or a .txt list")
@@ -327,6 +351,7 @@ def batch_command(
         calibration_required=_named(calibration),
         model=str(model.resolve()) if model is not None else None,
         camera_height_m=camera_height,
+        keep_left=keep_left,
     )
     summary = run_batch(
         entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
@@ -348,6 +373,7 @@ def debug_command(
     verifier: VerifierOption = None,
     horizon: HorizonOption = None,
     camera_height: CameraHeightOption = None,
+    traffic: TrafficOption = "right",
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -362,7 +388,13 @@ def debug_command(
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
-    pipeline = Pipeline(cal, *stages, horizon_y=horizon, camera_height_m=camera_height)
+    pipeline = Pipeline(
+        cal,
+        *stages,
+        horizon_y=horizon,
+        camera_height_m=camera_height,
+        keep_left=_keep_left(traffic),
+    )
     written = run_debug(
         source,
         span,

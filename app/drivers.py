@@ -116,6 +116,7 @@ def process_video(
     log: Callable[[str], None] = lambda message: None,
     calibration_required: bool = True,
     camera_height_m: float | None = None,
+    keep_left: bool = False,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square).
@@ -125,7 +126,8 @@ def process_video(
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
     `horizon_y` fixes the horizon row instead of estimating it from the footage;
-    `camera_height_m` (metres over the road) sizes the vehicle search for a camera that high.
+    `camera_height_m` (metres over the road) sizes the vehicle search for a camera that high;
+    `keep_left` is for traffic keeping left (the vehicle stage sees the frames mirrored).
     """
     warm_up = warm_up_opencv()
     try:
@@ -146,7 +148,13 @@ def process_video(
     progress = Progress(last - first, label=source.name)
     with (
         Pipeline(
-            calibration, lanes, vehicles, vehicles_in_worker, horizon_y, camera_height_m
+            calibration,
+            lanes,
+            vehicles,
+            vehicles_in_worker,
+            horizon_y,
+            camera_height_m,
+            keep_left,
         ) as pipeline,
         ExitStack() as sinks,
     ):
@@ -208,6 +216,7 @@ def process_still(
     log: Callable[[str], None] = lambda message: None,
     horizon_y: float | None = None,
     camera_height_m: float | None = None,
+    keep_left: bool = False,
 ) -> RunSummary:
     """Process one still into an annotated image (and a one-line record).
 
@@ -221,7 +230,12 @@ def process_still(
     started = time.perf_counter()
     calibration = calibration_for(calibration, size, source.name, False, log)
     with Pipeline(
-        calibration, lanes, vehicles, horizon_y=horizon_y, camera_height_m=camera_height_m
+        calibration,
+        lanes,
+        vehicles,
+        horizon_y=horizon_y,
+        camera_height_m=camera_height_m,
+        keep_left=keep_left,
     ) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)

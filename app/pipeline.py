@@ -22,6 +22,7 @@ from app.events import Event, EventDetector, FrameSignals
 from app.facts import FactsTracker, FrameFacts, RoadGeometry
 from app.sources import Frame
 from app.stages import FrameStage
+from app.traffic import KeepLeft
 from app.workers import StageWorker
 from camera_cal import (
     Calibration,
@@ -99,7 +100,8 @@ class Pipeline:
     `prepare(size)` must be called before the first frame of a clip: it builds the undistortion
     maps, resets the stages' history and, with `vehicles_in_worker`, starts the vehicle stage in a
     forked worker process. A frame of another size raises `FrameSizeChanged`. Use it as a context
-    manager, or call `close`, to stop the worker.
+    manager, or call `close`, to stop the worker. With `keep_left` (traffic keeping left) the
+    vehicle stage sees every frame mirrored and its boxes come back mirrored (app/traffic.py).
     """
 
     def __init__(
@@ -110,6 +112,7 @@ class Pipeline:
         vehicles_in_worker: bool = False,
         horizon_y: float | None = None,
         camera_height_m: float | None = None,
+        keep_left: bool = False,
     ) -> None:
         self.calibration = calibration
         self.horizon_y = horizon_y  # the user's horizon row; None: estimated from the footage
@@ -117,7 +120,11 @@ class Pipeline:
         self.camera_height_m = camera_height_m
         self._car_scale = 1.0  # the vehicle windows' ground scale (see `prepare`)
         self.lanes = lanes
-        self.vehicles = vehicles
+        # Traffic keeping left: the vehicle stage sees the frames mirrored (see app/traffic.py).
+        self.keep_left = keep_left
+        self.vehicles: VehicleDetector | KeepLeft | None = (
+            KeepLeft(vehicles) if keep_left and vehicles is not None else vehicles
+        )
         self.vehicles_in_worker = vehicles_in_worker and vehicles is not None
         self.size: tuple[int, int] | None = None
         self._undistorter: Undistorter | None = None

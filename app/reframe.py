@@ -46,7 +46,8 @@ class Framing:
     right, bottom), then resize to `size` (None: as it is); `rate` frames out per frame in, at
     `rate` times the frame rate (2: each frame twice, as a camera twice as fast sees a scene
     moving half as far a frame; 0.5: every other frame); `mirror`: then flip it left to right
-    (a road where traffic keeps left, seen as one where it keeps right)."""
+    (a road where traffic keeps right, seen as one where it keeps left); `keep_left`: roadview
+    is told so (`--traffic left`)."""
 
     name: str
     crop: Box | None = None
@@ -54,6 +55,7 @@ class Framing:
     size: tuple[int, int] | None = None
     rate: float = 1.0
     mirror: bool = False
+    keep_left: bool = False
 
     @property
     def unchanged(self) -> bool:
@@ -136,6 +138,7 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("half frame rate", rate=0.5),
         Framing("twice the frame rate", rate=2.0),
         Framing("mirrored", mirror=True),
+        Framing("mirrored, --traffic left", mirror=True, keep_left=True),
     )
 
 
@@ -263,7 +266,16 @@ def framing_scores(
     document = reframe_labels(json.loads(labels.read_text()), framing, info.size)
     record = folder / f"{video.stem}.jsonl"
     lanes, vehicles = build_stages(classifier=classifier)
-    process_video(clip, None, None, lanes, vehicles, record=record, vehicles_in_worker=False)
+    process_video(
+        clip,
+        None,
+        None,
+        lanes,
+        vehicles,
+        record=record,
+        vehicles_in_worker=False,
+        keep_left=framing.keep_left,
+    )
     truth = retime_labels(load_labels_document(document), framing, info.n_frames)
     frames = list(read_record(record))
     # The warm-up is the labels' 10 frames of the clip as it is, whatever the frame rate.
