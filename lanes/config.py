@@ -32,6 +32,13 @@ class LaneConfig:
     line_width_m: float = 0.15
     white_tophat: float = 18.0
     white_min_l: float = 120.0
+    # ... or, on a darker road, this much lighter than the road's median (the tuned camera's
+    # asphalt reads about 80): at dusk paint is much lighter than the road but not as light (the
+    # shared clips darkened to a road of 19 show their paint at 60-95, and no lane was found).
+    white_above_road: float = 40.0
+    # ... and never below this: darkened to a road of 5 (paint 25-50), floors of 60-65 drew lanes
+    # partly on glare, and moved the night clip's lanes in a third of its frames (see README).
+    white_min_l_dark: float = 90.0
     yellow_tophat: float = 7.0
     yellow_min_b: float = 140.0
     min_paint_m: float = 0.5  # paint is kept where it runs along the road at least this far

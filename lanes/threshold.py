@@ -21,6 +21,16 @@ def tophat_kernel(line_width_px: float) -> NDArray[np.uint8]:
     return np.ones((1, width), np.uint8)
 
 
+def least_white(lightness: NDArray[np.uint8], config: LaneConfig) -> float:
+    """The least lightness of white paint on this bird's-eye picture: the configured one where the
+    road is as light as the tuned camera's or lighter; on a darker road (dusk, an underexposed
+    camera) that much lighter than the road's median, as paint is though not as light; never
+    under the dark floor, below which glare and noise pass for paint."""
+    road = float(np.median(lightness[::4, ::4]))
+    relative = min(config.white_min_l, road + config.white_above_road)
+    return max(config.white_min_l_dark, relative)
+
+
 def lane_mask(
     birdseye_rgb: NDArray[np.uint8], config: LaneConfig, xm_per_px: float, ym_per_px: float
 ) -> NDArray[np.uint8]:
@@ -30,7 +40,7 @@ def lane_mask(
     kernel = tophat_kernel(config.line_width_m / xm_per_px)
     white_contrast = cv2.morphologyEx(lightness, cv2.MORPH_TOPHAT, kernel)
     yellow_contrast = cv2.morphologyEx(yellowness, cv2.MORPH_TOPHAT, kernel)
-    white = (white_contrast > config.white_tophat) & (lightness > config.white_min_l)
+    white = (white_contrast > config.white_tophat) & (lightness > least_white(lightness, config))
     yellow = (yellow_contrast > config.yellow_tophat) & (yellowness > config.yellow_min_b)
     mask = np.asarray(white | yellow, dtype=np.uint8)
     # Paint runs along the road: a vertical opening drops the flat speckles of concrete texture.

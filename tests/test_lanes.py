@@ -17,6 +17,7 @@ from lanes.line import Line
 from lanes.measure import implausible_lane, radius_of_curvature
 from lanes.perspective import birdseye_for
 from lanes.search import LinePixels, fit_lane, fit_line, paint_between
+from lanes.threshold import lane_mask
 from tests.helpers import process_clip, raised_camera
 
 
@@ -354,3 +355,60 @@ def test_covered_maps_a_vehicle_box_onto_the_birdseye_road() -> None:
     assert abs(xs.mean() - view.size[0] / 2) < 10 and ys.max() >= view.size[1] * 0.8 - 2
     sky = view.covered(np.array([[500.0, 100.0, 700.0, view.horizon_y - 5]]))
     assert sky is not None and not sky.any()
+
+
+@pytest.mark.parametrize(
+    ("road", "paint", "found"),
+    [(90, 235, True), (22, 100, True), (160, 235, True), (6, 70, False)],
+    ids=["daylight", "dusk", "concrete", "night-faint"],
+)
+def test_paint_is_told_by_its_lightness_against_the_road(
+    road: int, paint: int, found: bool
+) -> None:
+    """A 15 cm stripe of grey `paint` on grey `road` in the bird's-eye view is paint on a road as
+    light as the tuned camera's or lighter, and at dusk, where it is much lighter than the road
+    but darker than paint in daylight; on a nearly black road a faint stripe is not (glare and
+    noise look like that). The road beside it is never paint."""
+    config = LaneConfig()
+    xm, ym = 0.02, 0.05  # metres per bird's-eye pixel across and along the road
+    picture = np.full((120, 200, 3), road, np.uint8)
+    stripe = slice(100, 100 + round(config.line_width_m / xm))
+    picture[:, stripe] = paint
+    mask = lane_mask(picture, config, xm, ym).astype(bool)
+    assert mask[:, stripe].mean() > 0.9 if found else not mask[:, stripe].any()
+    assert not mask[:, :90].any() and not mask[:, 120:].any()
+    # The dusk stripe is darker than daylight paint must be: only its lightness against the
+    # road tells it.
+    if road == 22:
+        lightness = cv2.cvtColor(picture, cv2.COLOR_RGB2LAB)[0, 100, 0]
+        assert lightness < config.white_min_l
+
+
+@pytest.mark.slow
+def test_a_lane_is_found_at_dusk(data_dir: Path) -> None:
+    """project_cut_1 darkened to dusk (0.4 of its light: the asphalt at about 30 grey levels, the
+    paint darker than daylight paint's least lightness) keeps its lane within 20 px of the
+    labels; judged by that least lightness alone, no lane is found at all."""
+    from app.pipeline import Pipeline
+    from app.record import frame_record
+    from app.sources import probe_video, read_frames
+    from camera_cal import default_calibration_path, load_calibration
+
+    clip = data_dir / "videos" / "project_cut_1.mp4"
+    info = probe_video(clip)
+    dusk = [np.asarray(f * np.float32(0.4), np.uint8) for f in read_frames(clip, info)]
+    labels = load_labels(data_dir / "labels" / "project_cut_1.json")
+    calibration = load_calibration(default_calibration_path())
+    shares = {}
+    for name, config in (
+        ("relative", LaneConfig()),
+        ("absolute", LaneConfig(white_min_l_dark=LaneConfig().white_min_l)),
+    ):
+        with Pipeline(calibration, LaneFinder(config), None) as pipeline:
+            pipeline.prepare(info.size, info.fps)
+            records = [
+                frame_record(k, k / info.fps, info.size, out.result)
+                for k, out in enumerate(pipeline.stream(iter(dusk)))
+            ]
+        shares[name] = evaluate(labels, records)["lane"]["share_within_20px"] or 0.0
+    assert shares["relative"] >= 0.99 and shares["absolute"] == 0.0, shares
