@@ -47,7 +47,8 @@ class Framing:
     `rate` times the frame rate (2: each frame twice, as a camera twice as fast sees a scene
     moving half as far a frame; 0.5: every other frame); `mirror`: then flip it left to right
     (a road where traffic keeps right, seen as one where it keeps left); `keep_left`: roadview
-    is told so (`--traffic left`)."""
+    is told so (`--traffic left`); `light`: every pixel value times this (0.4: dusk, the
+    asphalt at about 30 grey levels)."""
 
     name: str
     crop: Box | None = None
@@ -56,6 +57,7 @@ class Framing:
     rate: float = 1.0
     mirror: bool = False
     keep_left: bool = False
+    light: float = 1.0
 
     @property
     def unchanged(self) -> bool:
@@ -66,6 +68,7 @@ class Framing:
             and self.size is None
             and self.rate == 1
             and not self.mirror
+            and self.light == 1
         )
 
     def source_frame(self, frame: int) -> int:
@@ -151,6 +154,23 @@ def upright_framing(source: tuple[int, int]) -> Framing:
     return Framing("phone held upright", crop=(side, 0, side + h, h), pad=(0, side, 0, side))
 
 
+def dusk_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
+    """Dusk on a `source`-sized clip: 0.4 of its light as it is, and so at half the size with
+    black side bars (the issue's dusk freeway at 640x360, where no lane was found)."""
+    w, h = source
+    side = round((w - h * 4 / 3) / 2)
+    return (
+        Framing("dusk (0.4 of the light)", light=0.4),
+        Framing(
+            "dusk, half size, side bars",
+            crop=(side, 0, w - side, h),
+            pad=(side, 0, side, 0),
+            size=(round(w * 0.5), round(h * 0.5)),
+            light=0.4,
+        ),
+    )
+
+
 def reframe_image(frame: Frame, framing: Framing) -> Frame:
     """The re-framed picture."""
     h, w = frame.shape[:2]
@@ -165,6 +185,8 @@ def reframe_image(frame: Frame, framing: Framing) -> Frame:
         out = cv2.resize(out, framing.size, interpolation=interpolation)
     if framing.mirror:
         out = out[:, ::-1]
+    if framing.light != 1:
+        out = cv2.convertScaleAbs(out, alpha=framing.light)
     return np.ascontiguousarray(out)
 
 

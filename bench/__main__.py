@@ -21,6 +21,7 @@ from app.assembly import build_stages
 from app.pipeline import Pipeline
 from app.reframe import (
     Framing,
+    dusk_framings,
     framing_table,
     standard_framings,
     upright_framing,
@@ -337,7 +338,7 @@ def main() -> None:
     # A portrait picture is measured too, but is no part of the tested aims: its lane starts
     # later (README).
     source = probe_video(clips[0][0]).size
-    framings = [*standard_framings(source), upright_framing(source)]
+    framings = [*standard_framings(source), upright_framing(source), *dusk_framings(source)]
     report["framings"] = framing_table(clips, calibration, framings)
     # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to
     # keep in view how blocky compression still fools the classifier.

@@ -13,6 +13,7 @@ from app.evaluate import FrameLabels, LabelledVehicle
 from app.reframe import (
     Framing,
     distance_ratios,
+    dusk_framings,
     framing_table,
     reframe_image,
     reframe_labels,
@@ -44,7 +45,7 @@ def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
 
 @pytest.mark.parametrize(
     "framing",
-    [*standard_framings((1280, 720)), upright_framing((1280, 720))],
+    [*standard_framings((1280, 720)), upright_framing((1280, 720)), *dusk_framings((1280, 720))],
     ids=lambda f: f.name,
 )
 def test_labels_move_with_the_picture(framing: Framing) -> None:
@@ -59,7 +60,9 @@ def test_labels_move_with_the_picture(framing: Framing) -> None:
     keyframe = labels["keyframes"]["0"]
     assert moved.shape[:2][::-1] == framing.output_size((1280, 720))
     (vehicle,) = keyframe["vehicles"]
-    white = np.argwhere(moved[..., 0] > 127)
+    # White is as light as the framing's light lets it be (dusk: 0.4 of 255).
+    assert moved.max() == round(255 * framing.light)
+    white = np.argwhere(moved[..., 0] > 127 * framing.light)
     top_part = white[white[:, 0] < min(int(vehicle["box"][3]) + 2, moved.shape[0])]
     ys, xs = top_part[:, 0], top_part[:, 1]
     in_box = (xs < vehicle["box"][2] + 2) & (ys < vehicle["box"][3] + 2)
@@ -69,7 +72,7 @@ def test_labels_move_with_the_picture(framing: Framing) -> None:
     side = "right" if framing.mirror else "left"
     assert not keyframe["lane"].get("left" if framing.mirror else "right")
     (row, x), *_ = keyframe["lane"][side].items()
-    assert moved[int(row), round(x)].max() > 127
+    assert moved[int(row), round(x)].max() > 127 * framing.light
     assert not vehicle["ignore"]
 
 
