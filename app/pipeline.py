@@ -121,7 +121,6 @@ class Pipeline:
         self._car_scale = 1.0  # the vehicle windows' ground scale (see `prepare`)
         self.lanes = lanes
         # Traffic keeping left: the vehicle stage sees the frames mirrored (see app/traffic.py).
-        self.keep_left = keep_left
         self.vehicles: VehicleDetector | KeepLeft | None = (
             KeepLeft(vehicles) if keep_left and vehicles is not None else vehicles
         )
