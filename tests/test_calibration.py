@@ -113,6 +113,20 @@ def test_undistortion_inverts_known_distortion() -> None:
     assert distances.max() < 1.0
 
 
+def test_undistortion_in_stripes_is_one_remap_of_the_whole_frame() -> None:
+    # A height that is no multiple of the stripes, a strong lens: the same pixels as OpenCV's
+    # one call over the frame.
+    size = (333, 101)
+    matrix = np.array([[300.0, 0, 166], [0, 300.0, 50], [0, 0, 1]])
+    cal = Calibration(matrix, np.array([-0.3, 0.1, 0.001, 0.0, 0.0]), size)
+    undistort = build_undistorter(cal, size)
+    rng = np.random.default_rng(1)
+    frame = rng.integers(0, 256, (101, 333, 3), dtype=np.uint8)
+    whole = cv2.remap(frame, undistort.map1, undistort.map2, cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(undistort(frame), whole)
+    assert not np.array_equal(whole, frame)
+
+
 def test_scaled_calibration_matches_full_size() -> None:
     cal = load_calibration(default_calibration_path())
     full = build_undistorter(cal, (1280, 720))
