@@ -16,6 +16,7 @@ import pytest
 
 from app import sources
 from app.evaluate import evaluate, load_labels
+from app.sinks import VideoWriter
 from app.sources import ffmpeg_binary, probe_video, read_frames
 from camera_cal import default_calibration_path
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
@@ -279,6 +280,29 @@ def test_odd_frame_size_is_encoded_with_input_coordinates(
         for vehicle in row.get("vehicles", []):
             x1, y1, x2, y2 = vehicle["box"]
             assert 0 <= x1 < x2 <= 1279 and 0 <= y1 < y2 <= 719
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".webm"])
+def test_written_colours_are_the_frames_colours_at_any_size(tmp_path: Path, suffix: str) -> None:
+    # Blocks of pure and mixed colours, the darkest and lightest values among them, in a frame
+    # of odd width and height: what is read back is what was written, up to the codec.
+    colours = np.array(
+        [[255, 0, 0], [0, 255, 0], [0, 0, 255], [0, 0, 0], [255, 255, 255], [200, 120, 40]],
+        np.uint8,
+    )
+    frame = np.repeat(np.repeat(colours[None, :], 2, axis=0), 16, axis=0)
+    frame = np.ascontiguousarray(np.repeat(frame, 16, axis=1)[:31, :95])  # 95 x 31 pixels
+    out = tmp_path / f"colours{suffix}"
+    writer = VideoWriter(out, (95, 31), 25.0)
+    for _ in range(5):
+        writer.write(frame)
+    writer.close()
+    info = probe_video(out)
+    assert info.size == (96, 32) and info.n_frames == 5
+    read = next(read_frames(out, info)).astype(int)
+    for k, colour in enumerate(colours):
+        inner = read[4:12, 16 * k + 4 : 16 * k + 12]
+        assert np.abs(inner - colour.astype(int)).max() <= 12, (colour, inner.mean(axis=(0, 1)))
 
 
 def test_webm_in_webm_out_and_other_containers_default_to_mp4(
