@@ -127,7 +127,7 @@ def _text_block(
     width = max(cv2.getTextSize(t, font, size, thick)[0][0] for t in lines) + 2 * pad
     x0 = max((frame.shape[1] - width) // 2, 0) if centred else 0
     roi = frame[: line_h * len(lines) + pad, x0 : x0 + width]
-    roi[:] = (roi * keep + np.array(color) * (1 - keep)).astype(np.uint8)
+    cv2.addWeighted(roi, keep, np.full_like(roi, color), 1 - keep, 0, dst=roi)
     for i, text in enumerate(lines):
         origin = (x0 + pad, round((i + 1) * line_h))
         cv2.putText(frame, text, origin, font, size, TEXT, thick, cv2.LINE_AA)
