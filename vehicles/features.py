@@ -31,6 +31,7 @@ COLOR_CODES = {
 }
 HYS_CLIP = 0.2
 EPS = 1e-6
+STRIPE_VALUES = 1 << 15  # pixel values (all channels) a stripe of `cell_hog` takes at most
 
 FloatArray = NDArray[np.float32]
 
@@ -155,7 +156,20 @@ def cell_hog(image: FloatArray, config: FeatureConfig) -> FloatArray:
     """Orientation histograms per cell: (cells_y, cells_x, channels, orientations).
 
     Each pixel votes its gradient magnitude into the two nearest unsigned orientation bins.
+    A cell's histogram depends on its own pixels alone, so a wide band is taken in stripes of
+    whole cell rows, each small enough for its temporaries to stay in the cache: the same
+    values, in half the time on a band 1,536 px wide.
     """
+    cell = config.pixels_per_cell
+    h, w, c = image.shape
+    rows = cell * max(1, STRIPE_VALUES // (w * c * cell))
+    if h <= rows:
+        return _cell_hog(image, config)
+    return np.concatenate([_cell_hog(image[top : top + rows], config) for top in range(0, h, rows)])
+
+
+def _cell_hog(image: FloatArray, config: FeatureConfig) -> FloatArray:
+    """`cell_hog` of a stripe in one pass."""
     cell, bins = config.pixels_per_cell, config.orientations
     h, w, c = image.shape
     gx, gy = cell_gradients(image, cell)
