@@ -251,7 +251,11 @@ def write_reframed(
     undistort = build_undistorter(calibration, info.size) if calibration else None
     size = framing.output_size(info.size)
     shown = 0  # frames written so far
-    with VideoSink(output, size, info.fps * framing.rate, preset=preset) as sink:
+    # ffmpeg converts the copies' RGB, as it did when the table was first measured: the table
+    # is one draw of the encoder, and a conversion a grey level apart is another (README).
+    with VideoSink(
+        output, size, info.fps * framing.rate, preset=preset, ffmpeg_converts=True
+    ) as sink:
         for index, frame in enumerate(read_frames(video, info)):
             if framing.source_frame(shown) != index:
                 continue  # dropped at a lower frame rate

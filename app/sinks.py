@@ -138,10 +138,13 @@ class VideoWriter:
 
     Frames go down the pipe as 4:2:0 YUV, the codecs' own format, converted by OpenCV (BT.601,
     video range, as ffmpeg converts RGB by default): half the bytes of RGB, and OpenCV converts
-    in a fraction of the time ffmpeg takes. Odd frame sizes are padded by one pixel at the right
-    or bottom (the codecs need even sizes), so coordinates stay those of the input. Audio is
-    copied from `audio`, cut to its span and never used to end the video: every frame written
-    is in the file.
+    in a fraction of the time ffmpeg takes. With `ffmpeg_converts` the frames go as RGB and
+    ffmpeg converts them, as the re-framed table's copies are made (`app.reframe`): the two
+    conversions differ by a grey level here and there, and that alone moves the table's rows
+    (see the README), so its copies stay made one way. Odd frame sizes are padded by one pixel at
+    the right or bottom (the codecs need even sizes), so coordinates stay those of the input.
+    Audio is copied from `audio`, cut to its span and never used to end the video: every frame
+    written is in the file.
     """
 
     def __init__(
@@ -151,8 +154,10 @@ class VideoWriter:
         fps: float,
         audio: AudioSpan | None = None,
         preset: str = FAST_PRESET,
+        ffmpeg_converts: bool = False,
     ) -> None:
         self.size = size
+        self._rgb = ffmpeg_converts
         container = container_for(path)
         width, height = size
         command = [
@@ -164,9 +169,11 @@ class VideoWriter:
             "-f",
             "rawvideo",
             "-pix_fmt",
-            "yuv420p",
+            "rgb24" if ffmpeg_converts else "yuv420p",
             "-s",
-            f"{width + width % 2}x{height + height % 2}",
+            f"{width}x{height}"
+            if ffmpeg_converts
+            else f"{width + width % 2}x{height + height % 2}",
             "-framerate",
             f"{fps:.6f}",
             "-i",
@@ -179,6 +186,8 @@ class VideoWriter:
                 command += ["-t", f"{audio.seconds:.6f}"]
             command += ["-i", str(audio.source), "-map", "0:v:0", "-map", "1:a:0?"]
             command += ["-c:a", container.audio]
+        if ffmpeg_converts and (width % 2 or height % 2):
+            command += ["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"]
         video = list(container.video)
         if "-preset" in video:
             video[video.index("-preset") + 1] = preset
@@ -198,7 +207,7 @@ class VideoWriter:
             if self._broken:
                 continue
             try:
-                self._process.stdin.write(i420(frame).data)
+                self._process.stdin.write(frame.data if self._rgb else i420(frame).data)
             except (BrokenPipeError, ValueError, OSError):
                 self._broken = True
 
@@ -280,8 +289,8 @@ class _AtomicSink:
 
 class VideoSink(_AtomicSink):
     """`with VideoSink(path, size, fps) as sink: sink.write(frame)`: an encoded video (codec by
-    the name's suffix, `audio` copied in, x264 `preset`) that appears only if the block
-    succeeds."""
+    the name's suffix, `audio` copied in, x264 `preset`, RGB converted by ffmpeg if
+    `ffmpeg_converts`) that appears only if the block succeeds."""
 
     def __init__(
         self,
@@ -290,15 +299,16 @@ class VideoSink(_AtomicSink):
         fps: float,
         audio: AudioSpan | None = None,
         preset: str = FAST_PRESET,
+        ffmpeg_converts: bool = False,
     ) -> None:
         super().__init__(path)
         container_for(self.path)  # an impossible container is refused before any work
-        self._settings = (size, fps, audio, preset)
+        self._settings = (size, fps, audio, preset, ffmpeg_converts)
         self._writer: VideoWriter | None = None
 
     def __enter__(self) -> VideoSink:
-        size, fps, audio, preset = self._settings
-        self._writer = VideoWriter(self._open(), size, fps, audio, preset)
+        size, fps, audio, preset, ffmpeg_converts = self._settings
+        self._writer = VideoWriter(self._open(), size, fps, audio, preset, ffmpeg_converts)
         return self
 
     def write(self, frame: Frame) -> None:

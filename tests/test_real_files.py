@@ -282,8 +282,12 @@ def test_odd_frame_size_is_encoded_with_input_coordinates(
             assert 0 <= x1 < x2 <= 1279 and 0 <= y1 < y2 <= 719
 
 
-@pytest.mark.parametrize("suffix", [".mp4", ".webm"])
-def test_written_colours_are_the_frames_colours_at_any_size(tmp_path: Path, suffix: str) -> None:
+@pytest.mark.parametrize(
+    ("suffix", "ffmpeg_converts"), [(".mp4", False), (".webm", False), (".mp4", True)]
+)
+def test_written_colours_are_the_frames_colours_at_any_size(
+    tmp_path: Path, suffix: str, ffmpeg_converts: bool
+) -> None:
     # Blocks of pure and mixed colours, the darkest and lightest values among them, in a frame
     # of odd width and height: what is read back is what was written, up to the codec.
     colours = np.array(
@@ -293,7 +297,7 @@ def test_written_colours_are_the_frames_colours_at_any_size(tmp_path: Path, suff
     frame = np.repeat(np.repeat(colours[None, :], 2, axis=0), 16, axis=0)
     frame = np.ascontiguousarray(np.repeat(frame, 16, axis=1)[:31, :95])  # 95 x 31 pixels
     out = tmp_path / f"colours{suffix}"
-    writer = VideoWriter(out, (95, 31), 25.0)
+    writer = VideoWriter(out, (95, 31), 25.0, ffmpeg_converts=ffmpeg_converts)
     for _ in range(5):
         writer.write(frame)
     writer.close()
