@@ -56,6 +56,7 @@ class BatchOptions:
     model: str | None = None  # None: the shipped model
     camera_height_m: float | None = None  # the cameras' height over the road (see `process`)
     keep_left: bool = False  # the footage's traffic keeps left (see `process --traffic`)
+    max_size: int = 0  # videos with a longer shorter side are processed at it (see `process`)
 
 
 @dataclass(frozen=True)
@@ -200,6 +201,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         calibration_required=options.calibration_required,
         camera_height_m=options.camera_height_m,
         keep_left=options.keep_left,
+        max_size=options.max_size,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]

@@ -65,6 +65,20 @@ CameraHeightOption = Annotated[
     ),
 ]
 
+# Video larger than 1080p is processed at 1080p: the stages read no more from more pixels (the
+# lanes keep a 720-row view, the vehicle bands are shrunk to their windows' model size) and 4K
+# would take decoding, undistortion and encoding four times as long (README: Speed at 1080p).
+DEFAULT_MAX_SIZE = 1080
+MaxSizeOption = Annotated[
+    int,
+    typer.Option(
+        "--max-size",
+        metavar="PX",
+        help="Video whose shorter side is longer than this many pixels is processed and written "
+        "at this size (4K as 1080p); 0 keeps every video's full size.",
+    ),
+]
+
 TrafficOption = Annotated[
     str,
     typer.Option(
@@ -75,6 +89,16 @@ TrafficOption = Annotated[
         "mirrored).",
     ),
 ]
+
+
+def _max_size(pixels: int) -> int:
+    """The --max-size option: 0, or a size the stages can work at."""
+    if pixels != 0 and pixels < 240:
+        raise InputError(
+            f"--max-size {pixels} is too small to find lanes and vehicles; "
+            "give 240 or more (1080 by default), or 0 for the full size"
+        )
+    return pixels
 
 
 def _keep_left(traffic: str) -> bool:
@@ -252,6 +276,7 @@ def process_command(
     horizon: HorizonOption = None,
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
+    max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -262,6 +287,7 @@ def process_command(
 
     check_input(source)
     keep_left = _keep_left(traffic)
+    _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
     cal = _calibration(calibration)
@@ -300,6 +326,7 @@ def process_command(
             calibration_required=_named(calibration),
             camera_height_m=camera_height,
             keep_left=keep_left,
+            max_size=max_size,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -333,6 +360,7 @@ def batch_command(
     model: ModelOption = None,
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
+    max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
@@ -352,6 +380,7 @@ def batch_command(
         model=str(model.resolve()) if model is not None else None,
         camera_height_m=camera_height,
         keep_left=keep_left,
+        max_size=_max_size(max_size),
     )
     summary = run_batch(
         entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
@@ -374,6 +403,7 @@ def debug_command(
     horizon: HorizonOption = None,
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
+    max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -402,6 +432,7 @@ def debug_command(
         pipeline,
         log=lambda m: typer.echo(m, err=True),
         calibration_required=_named(calibration),
+        max_size=_max_size(max_size),
     )
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 

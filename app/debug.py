@@ -16,7 +16,7 @@ from app.drivers import calibration_for, check_camera_height, check_horizon
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
-from app.sources import Frame, probe_video, read_frames
+from app.sources import Frame, probe_video, read_frames, reduced_row, within_size
 from camera_cal import SceneGeometry
 from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
@@ -169,11 +169,13 @@ def run_debug(
     pipeline: Pipeline,
     log: Callable[[str], None] = print,
     calibration_required: bool = True,
+    max_size: int = 0,
 ) -> list[Path]:
     """Process the clip up to the chosen frames and write their intermediates; returns files.
     The pipeline's calibration is left out for a clip of another aspect ratio unless
-    `calibration_required` (see `calibration_for`)."""
-    info = probe_video(source)
+    `calibration_required` (see `calibration_for`); a clip whose shorter side exceeds
+    `max_size` pixels (0: none) is seen at that size, as `process` sees it."""
+    info = within_size(probe_video(source), max_size)
     pipeline.calibration = calibration_for(
         pipeline.calibration, info.size, source.name, calibration_required, log
     )
@@ -181,7 +183,8 @@ def run_debug(
     if first >= info.n_frames:
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
-    check_horizon(pipeline.horizon_y, info.size)
+    check_horizon(pipeline.horizon_y, info.reduced_from or info.size)
+    pipeline.horizon_y = reduced_row(pipeline.horizon_y, info)
     check_camera_height(pipeline.camera_height_m)
     ensure_writable_dir(out_dir)
     start = max(0, first - round(WARMUP_S * info.fps))

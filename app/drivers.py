@@ -20,7 +20,15 @@ from app.progress import Progress
 from app.record import frame_record
 from app.runtime import warm_up_opencv
 from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
-from app.sources import decoding_notes, prefetch, probe_video, read_frames, read_image
+from app.sources import (
+    decoding_notes,
+    prefetch,
+    probe_video,
+    read_frames,
+    read_image,
+    reduced_row,
+    within_size,
+)
 from camera_cal import Calibration, fits
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
@@ -117,6 +125,7 @@ def process_video(
     calibration_required: bool = True,
     camera_height_m: float | None = None,
     keep_left: bool = False,
+    max_size: int = 0,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square).
@@ -127,13 +136,16 @@ def process_video(
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
     `horizon_y` fixes the horizon row instead of estimating it from the footage;
     `camera_height_m` (metres over the road) sizes the vehicle search for a camera that high;
-    `keep_left` is for traffic keeping left (the vehicle stage sees the frames mirrored).
+    `keep_left` is for traffic keeping left (the vehicle stage sees the frames mirrored);
+    a video whose shorter side exceeds `max_size` pixels (0: none) is processed and written at
+    that size (`within_size`; `horizon_y` is a row of the video as stored).
     """
     warm_up = warm_up_opencv()
     try:
-        info = probe_video(source)
+        info = within_size(probe_video(source), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
-        check_horizon(horizon_y, info.size)
+        check_horizon(horizon_y, info.reduced_from or info.size)
+        horizon_y = reduced_row(horizon_y, info)
         check_camera_height(camera_height_m)
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")

@@ -13,7 +13,7 @@ import subprocess
 import tempfile
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from queue import Empty, Queue
 from typing import IO
@@ -70,6 +70,28 @@ class VideoInfo:
     # The HDR transfer of a phone's HDR video ("smpte2084": PQ, "arib-std-b67": HLG), which
     # decoding tone-maps to the SDR picture the stages were tuned on; None: SDR.
     hdr: str | None = None
+    # The upright, square-pixel size before `within_size` reduced `size` to it; None: not reduced.
+    reduced_from: tuple[int, int] | None = None
+
+
+def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
+    """`info` with its frames to be decoded at most `max_side` pixels on their shorter side
+    (0: as they are): 4K as 1080p, a portrait 2160x3840 as 1080x1920; the aspect ratio kept, the
+    sides even (the 4:2:0 output's)."""
+    width, height = info.size
+    short = min(width, height)
+    if max_side <= 0 or short <= max_side:
+        return info
+    scale = max_side / short
+    size = (2 * round(width * scale / 2), 2 * round(height * scale / 2))
+    return replace(info, size=size, reduced_from=info.size)
+
+
+def reduced_row(y: float | None, info: VideoInfo) -> float | None:
+    """A row of the video as it is stored (a user's `--horizon`) in the frames `info` decodes."""
+    if y is None or info.reduced_from is None:
+        return y
+    return y * info.size[1] / info.reduced_from[1]
 
 
 def is_image(path: Path) -> bool:
@@ -236,9 +258,15 @@ def decoding_notes(info: VideoInfo) -> list[str]:
             "imageio-ffmpeg's own)"
         )
     if not square(info.pixel_aspect):
+        shown = info.reduced_from or info.size
         notes.append(
             f"pixels stored {info.pixel_aspect:.3g} times as wide as tall: stretched square, "
-            f"{info.size[0]}x{info.size[1]}"
+            f"{shown[0]}x{shown[1]}"
+        )
+    if info.reduced_from is not None:
+        (fw, fh), (w, h) = info.reduced_from, info.size
+        notes.append(
+            f"{fw}x{fh} is processed and written at {w}x{h} (--max-size 0 keeps the full size)"
         )
     return notes
 
@@ -294,7 +322,10 @@ def read_frames(
     filters = []
     if info.hdr is not None and can_tone_map():
         filters.append(SDR_TONE_MAP)
-    if not square(info.pixel_aspect):
+    if info.reduced_from is not None:
+        # Shrunk by area averaging (after any square-pixel stretch: one scaling does both).
+        filters.append(f"scale={width}:{height}:flags=area,setsar=1")
+    elif not square(info.pixel_aspect):
         # Square pixels, after the rotation ffmpeg applies first: the upright picture's size.
         filters.append(f"scale={width}:{height}:flags=bicubic,setsar=1")
     if filters:

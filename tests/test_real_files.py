@@ -267,6 +267,54 @@ def test_still_to_a_video_name_and_debug_onto_the_input(
     assert _digest(source) == _digest(made["silent"])
 
 
+@pytest.mark.parametrize(
+    ("size", "max_side", "expected"),
+    [
+        ((3840, 2160), 1080, (1920, 1080)),
+        ((2160, 3840), 1080, (1080, 1920)),  # a phone held upright: its shorter side
+        ((2560, 1081), 1080, (2558, 1080)),  # even sides
+        ((1920, 1080), 1080, (1920, 1080)),
+        ((3840, 2160), 0, (3840, 2160)),
+    ],
+)
+def test_video_is_decoded_at_most_max_size_on_its_shorter_side(
+    size: tuple[int, int], max_side: int, expected: tuple[int, int]
+) -> None:
+    info = sources.VideoInfo(size, 25.0, 10, 0.4, False)
+    reduced = sources.within_size(info, max_side)
+    assert reduced.size == expected
+    assert reduced.reduced_from == (None if expected == size else size)
+    assert sources.reduced_row(1000.0, reduced) == pytest.approx(1000.0 * expected[1] / size[1])
+
+
+def test_video_larger_than_the_max_size_is_processed_at_it(
+    test_video: Path, tmp_path: Path
+) -> None:
+    big = tmp_path / "big.mp4"
+    ffmpeg("-i", test_video, "-t", "0.4", "-vf", "scale=2560:1440", "-an", big)
+    out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
+    args = ["--calibration", "none", "--json", record, "-o", out]
+    result = run_cli("process", big, *args, "--max-size", "720", "--horizon", "840")
+    assert result.returncode == 0, result.stderr
+    assert "2560x1440 is processed and written at 1280x720" in result.stderr
+    info, frames = count_frames(out)
+    assert info.size == (1280, 720) and frames == 10
+    rows = read_record(record)
+    # The user's horizon is a row of the video as stored: 840 of 1440 rows is 420 of 720.
+    assert all(r["size"] == [1280, 720] and r["horizon_y"] == pytest.approx(420) for r in rows)
+    # The whole picture, shrunk (not cut): between the caption panel and the horizon (no lane
+    # or box drawn there) it is the input's.
+    source = next(read_frames(test_video, probe_video(test_video))).astype(int)
+    written = next(read_frames(out, info)).astype(int)
+    assert np.abs(written[160:380] - source[160:380]).mean() < 3.0
+    result = run_cli("process", big, *args, "--max-size", "0", "--end", "0.08", "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    assert (
+        count_frames(out)[0].size == (2560, 1440) and "processed and written" not in result.stderr
+    )
+    assert_one_line_error(run_cli("process", big, *args, "--max-size", "100"), "--max-size 100")
+
+
 def test_odd_frame_size_is_encoded_with_input_coordinates(
     made: dict[str, Path], tmp_path: Path
 ) -> None:
