@@ -16,7 +16,14 @@ from app.drivers import calibration_for, check_camera_height, check_horizon
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
-from app.sources import Frame, probe_video, read_frames, reduced_row, within_size
+from app.sources import (
+    Frame,
+    decoding_notes,
+    probe_video,
+    read_frames,
+    reduced_row,
+    within_size,
+)
 from camera_cal import SceneGeometry
 from vehicles.detections import Detections
 from vehicles.detector import VehicleResult
@@ -176,6 +183,8 @@ def run_debug(
     `calibration_required` (see `calibration_for`); a clip whose shorter side exceeds
     `max_size` pixels (0: none) is seen at that size, as `process` sees it."""
     info = within_size(probe_video(source), max_size)
+    for note in decoding_notes(info):
+        log(f"note: {source.name}: {note}")
     pipeline.calibration = calibration_for(
         pipeline.calibration, info.size, source.name, calibration_required, log
     )

@@ -293,7 +293,7 @@ def test_video_larger_than_the_max_size_is_processed_at_it(
     big = tmp_path / "big.mp4"
     ffmpeg("-i", test_video, "-t", "0.4", "-vf", "scale=2560:1440", "-an", big)
     out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
-    args = ["--calibration", "none", "--json", record, "-o", out]
+    args: list[str | Path] = ["--calibration", "none", "--json", record, "-o", out]
     result = run_cli("process", big, *args, "--max-size", "720", "--horizon", "840")
     assert result.returncode == 0, result.stderr
     assert "2560x1440 is processed and written at 1280x720" in result.stderr
