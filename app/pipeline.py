@@ -260,7 +260,7 @@ class Pipeline:
             waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
             return _Started(undistorted, scene, placement, waiting, timings, True, index)
         if self._worker is not None:
-            self._worker.submit(undistorted, **self._for_vehicles(placement))
+            self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
         lane = None
         if self.lanes is not None:
             t0 = time.perf_counter()
@@ -270,9 +270,10 @@ class Pipeline:
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
         return _Started(undistorted, scene, placement, lane, timings, False, index)
 
-    def _for_vehicles(self, placement: dict[str, Any]) -> dict[str, Any]:
-        """The placement the vehicle stage takes: the scene's, with the cars' ground scale."""
-        return {**placement, "ground_scale": self._car_scale}
+    def _for_vehicles(self, placement: dict[str, Any], scene: SceneGeometry) -> dict[str, Any]:
+        """The placement the vehicle stage takes: the scene's, with the cars' ground scale and
+        the road's lightness."""
+        return {**placement, "ground_scale": self._car_scale, "road_grey": scene.road_grey}
 
     def _finish(self, started: _Started) -> FrameOutput:
         """Add the vehicles (from the worker, or run here) to the frame's result."""
@@ -286,7 +287,9 @@ class Pipeline:
             vehicles = found
         elif self.vehicles is not None:
             t0 = time.perf_counter()
-            vehicles = self.vehicles.process(undistorted, **self._for_vehicles(started.placement))
+            vehicles = self.vehicles.process(
+                undistorted, **self._for_vehicles(started.placement, started.scene)
+            )
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
         if vehicles is not None:
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))

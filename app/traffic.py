@@ -70,6 +70,7 @@ class KeepLeft:
         vanishing_x: float | None = None,
         overlays: tuple[Box, ...] = (),
         ground_scale: float = 1.0,
+        road_grey: float | None = None,
     ) -> VehicleResult:
         """`VehicleDetector.process` of the mirrored frame, mirrored back."""
         width = frame.shape[1]
@@ -81,6 +82,7 @@ class KeepLeft:
             None if vanishing_x is None else width - vanishing_x,
             tuple(mirrored_box(box, width) for box in overlays),
             ground_scale,
+            road_grey,
         )
         return VehicleResult(
             mirrored_detections(found.detections, width),

@@ -7,7 +7,8 @@ seen; a bonnet is the band of bottom rows that stays still while the road above 
 captions are dense patches of edges that stay in place, and a mirror or pillar a still patch
 they outline (`camera_cal.overlay`); the horizon is the row of the vanishing point of the road's
 straight edges (lane lines, kerbs, barriers), the median over recent frames, and the caller's
-default until there is enough evidence.
+default until there is enough evidence. The road's lightness ahead (dusk, night) is read off the
+same frames.
 """
 
 from __future__ import annotations
@@ -45,6 +46,21 @@ class SceneGeometry:
     # A lane's width (and a car's) in pixels at a row below the horizon, against the tuned
     # camera's: under 1 for a camera mounted higher (a lorry's), over 1 for a lower one.
     ground_scale: float = 1.0
+    # The median grey level (0-255) of the road ahead over the last few seconds; None until
+    # measured. Daylight asphalt reads 70-150; at dusk it falls under 40.
+    road_grey: float | None = None
+
+
+def road_grey(grey: NDArray[np.uint8], live: Box, horizon_y: float) -> float:
+    """The median grey level of the road ahead in a grey frame: the middle 60 % of the live
+    box's width, from 40 % to 90 % of the way from the horizon down to its bottom (road, not
+    sky, bonnet or verges), every 4th pixel."""
+    x0, y0, x1, y1 = live
+    top = max(horizon_y, y0)
+    rows = slice(round(top + 0.4 * (y1 - top)), max(round(top + 0.9 * (y1 - top)), y0 + 1))
+    columns = slice(round(x0 + 0.2 * (x1 - x0)), max(round(x1 - 0.2 * (x1 - x0)), x0 + 1))
+    patch = grey[rows, columns][::4, ::4]
+    return float(np.median(patch)) if patch.size else 0.0
 
 
 def scale_height(live_size: tuple[int, int]) -> float:
@@ -246,6 +262,8 @@ class SceneTracker:
         settle_x: float = 0.03,
         overlay_every: int = 5,
         ground: GroundScale | None = None,
+        light_every: int = 5,
+        light_window: int = 15,
     ) -> None:
         self.size = size
         self.ground = ground if ground is not None else GroundScale()
@@ -277,6 +295,8 @@ class SceneTracker:
         )
         self._placed = (self._current.horizon_y, self._current.live, self._current.live)
         self._placed_x: float | None = None  # the vanishing point's column, placed on its own
+        self.light_every = light_every
+        self._greys: deque[float] = deque(maxlen=light_window)  # the road's recent grey levels
 
     def _picture(self) -> Box:
         """The box inside the bars."""
@@ -337,6 +357,8 @@ class SceneTracker:
         overlays = tuple(b for b in self._captions if b[1] < live[3] and b[3] > live[1])
         if self.fixed_horizon is None and due and small is not None:
             self._measure(small, live, overlays)
+        if self._count % self.light_every == 0:
+            self._greys.append(road_grey(grey, live, self._current.horizon_y))
         self._count += 1
         vanishing_x = None
         if self.fixed_horizon is not None:
@@ -349,7 +371,15 @@ class SceneTracker:
             horizon, estimated = self.default_horizon, False
         bonnet = self._bonnet if live[3] == self._bonnet else None
         self._current = SceneGeometry(
-            self.size, horizon, live, estimated, bonnet, vanishing_x, overlays, self.ground.value
+            self.size,
+            horizon,
+            live,
+            estimated,
+            bonnet,
+            vanishing_x,
+            overlays,
+            self.ground.value,
+            float(np.median(self._greys)) if self._greys else None,
         )
         tolerance = self.settle * self.size[1]
         placed_horizon, placed_live, _ = self._placed

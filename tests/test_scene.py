@@ -16,6 +16,7 @@ from camera_cal.scene import (
     SceneTracker,
     bonnet_row,
     live_box,
+    road_grey,
     road_segments,
     scale_height,
     vanishing_point,
@@ -270,3 +271,28 @@ def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     higher = scene_picture(frame, replace(scene, ground_scale=0.67))
     label = (slice(100, 150), slice(0, 640))  # the text above the horizon row
     assert (higher[label] > 0).sum() > 1.3 * (tuned[label] > 0).sum()
+
+
+def test_the_road_ahead_is_measured_for_its_lightness_not_the_sky_or_bonnet() -> None:
+    # Bright sky above the horizon, asphalt of grey 30 below it, a bright bonnet at the bottom
+    # (outside the live box): the road's grey, whatever the live box's size.
+    frame = np.full((360, 640), 30, np.uint8)
+    frame[:150] = 220
+    frame[330:] = 250
+    assert road_grey(frame, (0, 0, 640, 330), 150.0) == 30.0
+    assert road_grey(frame, (80, 20, 560, 330), 150.0) == 30.0
+
+
+def test_the_scene_says_how_light_the_road_is_at_dusk(data_dir: Path) -> None:
+    clip = data_dir / "videos" / "project_cut_1.mp4"
+    info = probe_video(clip)
+    greys = []
+    for light in (1.0, 0.4):
+        tracker = SceneTracker(info.size, 0.58 * info.size[1])
+        assert tracker.current.road_grey is None
+        for frame in list(read_frames(clip, info))[:20]:
+            scene = tracker.update(np.asarray(frame * np.float32(light), np.uint8))
+        assert scene.road_grey is not None
+        greys.append(scene.road_grey)
+    # Daylight asphalt reads 70-80 there; 0.4 of the light, 0.4 of the grey.
+    assert 65 <= greys[0] <= 85 and greys[1] == pytest.approx(0.4 * greys[0], abs=2)

@@ -643,3 +643,52 @@ def test_small_compressed_footage_is_read_by_the_low_resolution_model(
     lowres, sharp = scores["lowres"], scores["sharp"]
     assert lowres["precision"] >= 0.95, scores
     assert lowres["true_positives"] >= 2 * sharp["true_positives"], scores
+
+
+def test_windows_need_less_certainty_on_a_road_at_dusk() -> None:
+    config = DetectorConfig()
+    day, dusk = config.min_probability, config.dark_min_probability
+    assert config.min_probability_at(None) == day  # unmeasured: daylight
+    assert config.min_probability_at(120.0) == day
+    assert config.min_probability_at(30.0) == dusk
+    assert dusk < config.min_probability_at(50.0) < day
+    # Night: noise is most of what there is; the daylight certainty again.
+    assert config.min_probability_at(2.0) == day
+
+
+@pytest.mark.slow
+def test_cars_are_found_at_dusk(data_dir: Path) -> None:
+    """test_video and project_cut_1 at 0.4 of their light (asphalt at about 30 grey levels):
+    with the certainty a window needs lowered on such a road, more cars are found and no more
+    false boxes are drawn than with the daylight certainty."""
+    from dataclasses import replace
+
+    from app.assembly import build_stages
+    from app.pipeline import Pipeline
+    from app.record import frame_record
+
+    calibration = load_calibration(default_calibration_path())
+    found = {}
+    for name, dark in (("dusk", DetectorConfig().dark_min_probability), ("daylight", 0.9)):
+        tp = fp = fn = 0
+        for clip in ("test_video", "project_cut_1"):
+            path = data_dir / "videos" / f"{clip}.mp4"
+            info = probe_video(path)
+            dusk = (np.asarray(f * np.float32(0.4), np.uint8) for f in read_frames(path, info))
+            detector = build_stages(lanes=False).vehicles
+            assert detector is not None
+            detector.config = replace(detector.config, dark_min_probability=dark)
+            with Pipeline(calibration, None, detector) as pipeline:
+                pipeline.prepare(info.size, info.fps)
+                records = [
+                    frame_record(k, k / info.fps, info.size, out.result)
+                    for k, out in enumerate(pipeline.stream(dusk))
+                ]
+            labels = load_labels(data_dir / "labels" / f"{clip}.json")
+            scores = evaluate(labels, records)["vehicles"]["iou_0.5"]
+            tp += scores["true_positives"]
+            fp += scores["false_positives"]
+            fn += scores["false_negatives"]
+        found[name] = (tp / (tp + fn), tp / (tp + fp))
+    (recall, precision), (day_recall, day_precision) = found["dusk"], found["daylight"]
+    assert recall >= day_recall + 0.05 and precision >= day_precision, found

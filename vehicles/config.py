@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class Band:
@@ -96,6 +98,13 @@ class DetectorConfig:
     # crops, misses cars there (see the README).
     lowres_rows: float = 540.0
     min_probability: float = 0.9  # a window adds heat when the calibrated P(vehicle) is above
+    # ... or this much on a road at dusk (a car there has a third of its daylight contrast and
+    # the model, calibrated on daylight crops, is less sure of it): `dark_min_probability` where
+    # the road ahead's grey level is from `dark_road[1]` to `dark_road[2]`, `min_probability`
+    # from `dark_road[3]` up and, on a road darker than `dark_road[0]` (night, where the
+    # encoder's noise is most of what there is), down; linearly between.
+    dark_min_probability: float = 0.7
+    dark_road: tuple[float, float, float, float] = (10.0, 20.0, 40.0, 60.0)
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
     # fooled the detector, while the detector's windows still place the boxes.
@@ -126,6 +135,14 @@ class DetectorConfig:
     # The frame rate the frame counts of `heat` and `track` are for: at another rate they cover
     # the same time (`at_rate`), so a car is shown, kept and dropped after as many seconds.
     frame_rate: float = 25.0
+
+    def min_probability_at(self, road_grey: float | None) -> float:
+        """The least P(vehicle) of a hit on a road ahead of this grey level (None: unknown,
+        taken as daylight)."""
+        if road_grey is None:
+            return self.min_probability
+        day, dusk = self.min_probability, self.dark_min_probability
+        return float(np.interp(road_grey, self.dark_road, (day, dusk, dusk, day)))
 
     def at_rate(self, fps: float) -> DetectorConfig:
         """The same settings for video at `fps` frames a second: the heat history and the

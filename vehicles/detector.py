@@ -221,12 +221,14 @@ class VehicleDetector:
         vanishing_x: float | None = None,
         overlays: tuple[tuple[int, int, int, int], ...] = (),
         ground_scale: float = 1.0,
+        road_grey: float | None = None,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given,
         their windows sized by `ground_scale`, a car's size at a row against the tuned camera's;
         `vanishing_x` does not move them, boxes reach towards it; windows over `overlays`,
-        captions or parts of the car, do not heat)."""
+        captions or parts of the car, do not heat; on a dark road, by the scene's `road_grey`,
+        less sure windows heat: `DetectorConfig.min_probability_at`)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
@@ -236,7 +238,7 @@ class VehicleDetector:
         hits = self.search(frame, parity, view)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view)
-        strong = proba >= cfg.min_probability
+        strong = proba >= cfg.min_probability_at(road_grey)
         sure = checked >= cfg.min_verified
         vetoed = boxes[strong & ~sure]
         strong &= sure
