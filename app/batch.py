@@ -228,6 +228,7 @@ FRAME_COLUMNS = (
     ("speed_kmh", "double"),
     ("headway_s", "double"),
     ("ttc_s", "double"),
+    ("road_grey", "double"),
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -279,6 +280,7 @@ def write_table_parts(
             "speed_kmh": r.get("speed_kmh"),
             "headway_s": r.get("headway_s"),
             "ttc_s": r.get("ttc_s"),
+            "road_grey": r.get("road_grey"),
         }
         for r in rows
     ]

@@ -66,6 +66,7 @@ def frame_record(
         record["horizon_y"] = round(result.scene.horizon_y, 1)
         record["vanishing_x"] = _rounded(result.scene.vanishing_x, 1)
         record["ground_scale"] = round(result.scene.ground_scale, 3)
+        record["road_grey"] = _rounded(result.scene.road_grey, 1)
         record["overlays"] = [list(box) for box in result.scene.overlays]
     facts = result.facts
     if result.vehicles is not None:

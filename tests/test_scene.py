@@ -121,6 +121,8 @@ def test_horizon_in_the_record_and_the_override(test_video: Path, tmp_path: Path
     # The shipped camera looks along the road: its vanishing point is near the centre column.
     columns = [r["vanishing_x"] for r in rows if r["vanishing_x"] is not None]
     assert columns and all(600 < x < 680 for x in columns)
+    # The road's lightness from the first frame: daylight asphalt.
+    assert all(60 <= r["road_grey"] <= 160 for r in rows)
     fixed = process_clip(test_video, tmp_path, "--end", "0.4", "--horizon", "380")
     assert {r["horizon_y"] for r in fixed} == {380.0}
     assert {r["vanishing_x"] for r in fixed} == {None}
