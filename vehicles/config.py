@@ -105,6 +105,10 @@ class DetectorConfig:
     # encoder's noise is most of what there is), down; linearly between.
     dark_min_probability: float = 0.7
     dark_road: tuple[float, float, float, float] = (10.0, 20.0, 40.0, 60.0)
+    # On a road darker than `dark_road[2]` (dusk, night) the windows read the mean of the last
+    # `dark_frames` frames: the encoder renders a dim sensor's grain anew in every frame, while a
+    # car ahead stays where it was (the grainy copies' false boxes, README); 1: the frame alone.
+    dark_frames: int = 3
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
     # fooled the detector, while the detector's windows still place the boxes.
@@ -161,13 +165,15 @@ class DetectorConfig:
             max_missed=frames(self.track.max_missed),
             show_missed=frames(self.track.show_missed),
         )
-        return replace(self, heat=heat, track=track, frame_rate=fps)
+        dark_frames = frames(self.dark_frames)
+        return replace(self, heat=heat, track=track, dark_frames=dark_frames, frame_rate=fps)
 
     def for_still(self) -> DetectorConfig:
         """The same search for a single image: every band, no history to wait for or average."""
         return replace(
             self,
             interleave=False,
+            dark_frames=1,
             heat=replace(self.heat, history=1),
             track=replace(self.track, confirm_frames=1),
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -91,6 +92,14 @@ def parts_of_larger(
     return parts
 
 
+def frame_mean(frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
+    """The rounded mean, pixel by pixel, of equally sized uint8 frames."""
+    total = np.zeros(frames[0].shape, np.uint16)
+    for frame in frames:
+        total += frame
+    return ((total + len(frames) // 2) // len(frames)).astype(np.uint8)
+
+
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -122,22 +131,37 @@ class VehicleDetector:
         )
         self.keep_debug = keep_debug
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
-        self.heatmap, self.tracker = self._fresh_history()
+        self.heatmap, self.tracker, self.dark_frames = self._fresh_history()
         self.frame_index = 0
 
-    def _fresh_history(self) -> tuple[Heatmap, Tracker]:
-        """An empty heat map and tracker whose frame counts cover the config's time at `fps`."""
+    def _fresh_history(self) -> tuple[Heatmap, Tracker, deque[NDArray[np.uint8]]]:
+        """An empty heat map, tracker and store of dark frames whose frame counts cover the
+        config's time at `fps`."""
         timed = self.config.at_rate(self.fps)
         # Region boxes come from heat averaged over the recent frames: centred that far back.
-        return Heatmap(timed.heat), Tracker(timed.track, lag=(timed.heat.recent - 1) / 2)
+        tracker = Tracker(timed.track, lag=(timed.heat.recent - 1) / 2)
+        return Heatmap(timed.heat), tracker, deque(maxlen=timed.dark_frames)
 
     def reset(self, fps: float | None = None) -> None:
         """Forget heat and tracks; with `fps`, frames now come at that rate (the history keeps
         covering the same time)."""
         if fps is not None:
             self.fps = fps
-        self.heatmap, self.tracker = self._fresh_history()
+        self.heatmap, self.tracker, self.dark_frames = self._fresh_history()
         self.frame_index = 0
+
+    def seen(self, frame: NDArray[np.uint8], road_grey: float | None) -> NDArray[np.uint8]:
+        """The picture the windows read: on a road at dusk or darker (`road_grey` under
+        `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
+        included; else the frame itself (and the dark frames are forgotten)."""
+        store = self.dark_frames
+        if road_grey is None or road_grey >= self.config.dark_road[2]:
+            store.clear()
+            return frame
+        if store and store[-1].shape != frame.shape:
+            store.clear()
+        store.append(frame.copy())
+        return frame_mean(store) if len(store) > 1 else frame
 
     def view(
         self,
@@ -228,14 +252,15 @@ class VehicleDetector:
         their windows sized by `ground_scale`, a car's size at a row against the tuned camera's;
         `vanishing_x` does not move them, boxes reach towards it; windows over `overlays`,
         captions or parts of the car, do not heat; on a dark road, by the scene's `road_grey`,
-        less sure windows heat: `DetectorConfig.min_probability_at`)."""
+        the windows read the mean of the last frames (`seen`) and less sure ones heat:
+        `DetectorConfig.min_probability_at`)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
         smallest = cfg.min_box * view.scale_height * view.ground_scale
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
-        hits = self.search(frame, parity, view)
+        hits = self.search(self.seen(frame, road_grey), parity, view)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view)
         strong = proba >= cfg.min_probability_at(road_grey)
