@@ -36,6 +36,10 @@ class LaneConfig:
     # asphalt reads about 80): at dusk paint is much lighter than the road but not as light (the
     # shared clips darkened to a road of 19 show their paint at 60-95, and no lane was found).
     white_above_road: float = 40.0
+    # ... in full on a road this light or lighter (the tuned asphalt), in proportion on a darker
+    # one: at dusk on concrete (road 62-66) the white dashes read 100-109, under road + 40, and
+    # the lane was drawn from the yellow line and a made-up side 30-80 px off (0: always in full).
+    white_margin_road: float = 80.0
     # ... and never below this: darkened to a road of 5 (paint 25-50), floors of 60-65 drew lanes
     # partly on glare, and moved the night clip's lanes in a third of its frames (see README).
     white_min_l_dark: float = 90.0

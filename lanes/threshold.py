@@ -24,10 +24,13 @@ def tophat_kernel(line_width_px: float) -> NDArray[np.uint8]:
 def least_white(lightness: NDArray[np.uint8], config: LaneConfig) -> float:
     """The least lightness of white paint on this bird's-eye picture: the configured one where the
     road is as light as the tuned camera's or lighter; on a darker road (dusk, an underexposed
-    camera) that much lighter than the road's median, as paint is though not as light; never
-    under the dark floor, below which glare and noise pass for paint."""
+    camera) that much lighter than the road's median, as paint is though not as light, and on a
+    road darker than the tuned asphalt less so, in proportion (dim light narrows every
+    difference); never under the dark floor, below which glare and noise pass for paint."""
     road = float(np.median(lightness[::4, ::4]))
-    relative = min(config.white_min_l, road + config.white_above_road)
+    full = config.white_margin_road
+    margin = config.white_above_road * (min(1.0, road / full) if full > 0 else 1.0)
+    relative = min(config.white_min_l, road + margin)
     return max(config.white_min_l_dark, relative)
 
 
