@@ -96,10 +96,20 @@ def calibration_for(
     """The calibration to undistort `name`'s frames of `size` with: `calibration` where it fits.
     Frames of another aspect ratio come from another camera: without a calibration the user
     named (`required`) they are processed without undistortion, and `log` says so; with one,
-    `CalibrationMismatch` says it does not fit."""
-    if calibration is None or fits(calibration, size) or required:
+    `CalibrationMismatch` says it does not fit. Frames of another size with the shipped
+    calibration's aspect ratio are undistorted with it scaled, and `log` says so: most dashcams
+    film 16:9, and another camera's footage needs `--calibration none` or its own."""
+    if calibration is None or required:
         return calibration
     cw, ch = calibration.image_size
+    if fits(calibration, size):
+        if tuple(size) != (cw, ch):
+            log(
+                f"note: {name} is {size[0]}x{size[1]}, undistorted with the shipped dashcam's "
+                f"calibration scaled from {cw}x{ch} (for footage of another camera pass "
+                "--calibration none, or --calibration FILE of that camera)"
+            )
+        return calibration
     log(
         f"note: {name} is {size[0]}x{size[1]}, not of the calibration's aspect ratio "
         f"({cw}x{ch}): another camera, processed without undistortion (pass --calibration FILE "

@@ -58,6 +58,9 @@ def test_other_resolution_same_aspect_is_scaled(clips: dict[str, Path], tmp_path
     out = tmp_path / "o.mp4"
     result = run_cli("process", clips["small"], "-o", out)
     assert result.returncode == 0, result.stderr
+    # Said, as most dashcams film 16:9: another camera's footage needs --calibration none.
+    assert "calibration scaled from 1280x720" in result.stderr
+    assert "--calibration none" in result.stderr
     info, frames = count_frames(out)
     assert info.size == (640, 360) and frames == 10
 
@@ -235,6 +238,7 @@ def test_start_end_and_frame_numbers(test_video: Path, tmp_path: Path) -> None:
         "process", test_video, "-o", out, "--json", record, "--start", "0.4", "--end", "1.0"
     )
     assert result.returncode == 0, result.stderr
+    assert "calibration scaled" not in result.stderr  # the shipped camera's own size
     frames = [r["frame"] for r in read_record(record)]
     assert frames == list(range(10, 25))
     assert count_frames(out)[1] == 15
