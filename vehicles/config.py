@@ -124,6 +124,13 @@ class DetectorConfig:
     # the rise is at least `bottom_min_rise` grey levels (see vehicles/refine.py).
     bottom_reach: tuple[float, float] | None = (0.3, 0.3)
     bottom_min_rise: float = 8.0
+    # A box's top moves to where the picture changes most across its middle (the roof's outline),
+    # searched this share of its height above and below it (None: heat alone), if the change is
+    # at least `top_min_change` grey levels: heat from square windows on a car about half as tall
+    # as wide reaches above its roof. Less far up, where other cars, barriers and bridges have
+    # edges as strong (see vehicles/refine.py).
+    top_reach: tuple[float, float] | None = (0.1, 0.2)
+    top_min_change: float = 20.0
     # A box reaches this share of its width further towards the road's vanishing column: a car
     # beside the camera's axis shows its rear (or front) and the side that faces the axis, and
     # the windows, trained mostly on rear views, heat the end and stop short of that side; a car

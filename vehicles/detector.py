@@ -13,7 +13,7 @@ from vehicles.config import DetectorConfig
 from vehicles.detections import Detections, covered_share, smaller_sides
 from vehicles.heatmap import Heatmap
 from vehicles.model import ModelError, VehicleModel
-from vehicles.refine import reach_toward, snap_bottoms
+from vehicles.refine import reach_toward, snap_bottoms, snap_tops
 from vehicles.search import BandHits, LinearWeights, View, search_band
 from vehicles.tracker import Tracker
 
@@ -284,6 +284,10 @@ class VehicleDetector:
         if cfg.bottom_reach is not None:
             region_boxes = snap_bottoms(
                 frame, region_boxes, view.live, cfg.bottom_reach, cfg.bottom_min_rise
+            )
+        if cfg.top_reach is not None:
+            region_boxes = snap_tops(
+                frame, region_boxes, view.live, cfg.top_reach, cfg.top_min_change
             )
         big = smaller_sides(region_boxes) >= smallest
         scores = 1.0 - np.exp(-peaks[big] / max(cfg.heat.threshold, 1e-6))

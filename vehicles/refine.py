@@ -2,7 +2,9 @@
 
 Heat from square windows says where a vehicle is, not where it ends: a saloon and an SUV heat the
 same rows. Below a vehicle lies its shadow and its tyres, darker than the road beyond, so its
-bottom edge is the row where the picture brightens most going down across the vehicle's middle.
+bottom edge is the row where the picture brightens most going down across the vehicle's middle;
+its roof's outline against what lies behind is the row near the heat's top where the picture
+changes most across the middle.
 Beside the camera's axis a vehicle shows its side too, on the side facing the axis, which windows
 trained mostly on rear views heat little: its box reaches further that way.
 """
@@ -38,15 +40,56 @@ def snap_bottoms(
         right = int(min(lx1, round(x1 - margin * width)))
         if bottom - top < 4 or right - left < 4:
             continue
-        strip = cv2.cvtColor(
-            np.ascontiguousarray(frame[top : bottom + 1, left:right]), cv2.COLOR_RGB2GRAY
-        )
-        profile = np.median(strip, axis=1).astype(np.float32).reshape(-1, 1)
-        profile = np.asarray(cv2.GaussianBlur(profile, (1, 3), 0), np.float32).ravel()
+        profile = _row_profile(frame, (top, bottom), (left, right))
         rise = profile[2:] - profile[:-2]  # at rows top + 1 .. bottom - 1
         row = int(np.argmax(rise))
         if rise[row] >= min_rise:
             box[3] = float(top + 1 + row)
+    return out
+
+
+def _row_profile(
+    frame: NDArray[np.uint8], rows: tuple[int, int], columns: tuple[int, int]
+) -> NDArray[np.float32]:
+    """The median grey level of each row from rows[0] to rows[1] (inclusive) over the columns
+    [columns[0], columns[1]), lightly smoothed down the rows."""
+    strip = cv2.cvtColor(
+        np.ascontiguousarray(frame[rows[0] : rows[1] + 1, columns[0] : columns[1]]),
+        cv2.COLOR_RGB2GRAY,
+    )
+    profile = np.median(strip, axis=1).astype(np.float32).reshape(-1, 1)
+    return np.asarray(cv2.GaussianBlur(profile, (1, 3), 0), np.float32).ravel()
+
+
+def snap_tops(
+    frame: NDArray[np.uint8],
+    boxes: NDArray[np.float64],
+    live: tuple[int, int, int, int],
+    reach: tuple[float, float] = (0.1, 0.2),
+    min_change: float = 20.0,
+    margin: float = 0.25,
+) -> NDArray[np.float64]:
+    """The boxes with each top edge moved to the row where the picture, across the box's middle
+    (less `margin` of its width at each side: a roof is narrower than its car), changes most
+    going down: searched from `reach[0]` of the box's height above its top to `reach[1]` below,
+    inside the `live` box. A box where no row changes by `min_change` grey levels, or cut by
+    the live picture's side (its middle is not the car's), keeps its top."""
+    out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
+    lx0, ly0, lx1, ly1 = live
+    for box in out:
+        x0, y0, x1, y1 = box
+        width, height = x1 - x0, y1 - y0
+        top = int(max(ly0, round(y0 - reach[0] * height)))
+        bottom = int(min(ly1 - 1, round(y0 + reach[1] * height)))
+        left = int(max(lx0, round(x0 + margin * width)))
+        right = int(min(lx1, round(x1 - margin * width)))
+        if bottom - top < 4 or right - left < 4 or x0 <= lx0 + 1 or x1 >= lx1 - 1:
+            continue
+        profile = _row_profile(frame, (top, bottom), (left, right))
+        change = np.abs(profile[2:] - profile[:-2])  # at rows top + 1 .. bottom - 1
+        row = int(np.argmax(change))
+        if change[row] >= min_change:
+            box[1] = float(top + 1 + row)
     return out
 
 
