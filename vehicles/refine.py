@@ -68,12 +68,14 @@ def snap_tops(
     reach: tuple[float, float] = (0.1, 0.2),
     min_change: float = 20.0,
     margin: float = 0.25,
+    min_height: float = 32.0,
 ) -> NDArray[np.float64]:
     """The boxes with each top edge moved to the row where the picture, across the box's middle
     (less `margin` of its width at each side: a roof is narrower than its car), changes most
     going down: searched from `reach[0]` of the box's height above its top to `reach[1]` below,
-    inside the `live` box. A box where no row changes by `min_change` grey levels, or cut by
-    the live picture's side (its middle is not the car's), keeps its top."""
+    inside the `live` box. A box where no row changes by `min_change` grey levels, cut by the
+    live picture's side (its middle is not the car's), or under `min_height` pixels tall (a few
+    rows of a far car's roof and window blur into one edge) keeps its top."""
     out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
     lx0, ly0, lx1, ly1 = live
     for box in out:
@@ -83,7 +85,8 @@ def snap_tops(
         bottom = int(min(ly1 - 1, round(y0 + reach[1] * height)))
         left = int(max(lx0, round(x0 + margin * width)))
         right = int(min(lx1, round(x1 - margin * width)))
-        if bottom - top < 4 or right - left < 4 or x0 <= lx0 + 1 or x1 >= lx1 - 1:
+        cut = x0 <= lx0 + 1 or x1 >= lx1 - 1
+        if height < min_height or cut or bottom - top < 4 or right - left < 4:
             continue
         profile = _row_profile(frame, (top, bottom), (left, right))
         change = np.abs(profile[2:] - profile[:-2])  # at rows top + 1 .. bottom - 1
