@@ -30,35 +30,11 @@ def snap_bottoms(
     A box where no row brightens by `min_rise` grey levels (a dark road at night) keeps its
     bottom."""
     out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
-    lx0, ly0, lx1, ly1 = live
     for box in out:
-        x0, y0, x1, y1 = box
-        width, height = x1 - x0, y1 - y0
-        top = int(max(ly0, round(y1 - reach[0] * height)))
-        bottom = int(min(ly1 - 1, round(y1 + reach[1] * height)))
-        left = int(max(lx0, round(x0 + margin * width)))
-        right = int(min(lx1, round(x1 - margin * width)))
-        if bottom - top < 4 or right - left < 4:
-            continue
-        profile = _row_profile(frame, (top, bottom), (left, right))
-        rise = profile[2:] - profile[:-2]  # at rows top + 1 .. bottom - 1
-        row = int(np.argmax(rise))
-        if rise[row] >= min_rise:
-            box[3] = float(top + 1 + row)
+        found = _strongest_row(frame, box, box[3], reach, margin, live, signed=True)
+        if found is not None and found[1] >= min_rise:
+            box[3] = float(found[0])
     return out
-
-
-def _row_profile(
-    frame: NDArray[np.uint8], rows: tuple[int, int], columns: tuple[int, int]
-) -> NDArray[np.float32]:
-    """The median grey level of each row from rows[0] to rows[1] (inclusive) over the columns
-    [columns[0], columns[1]), lightly smoothed down the rows."""
-    strip = cv2.cvtColor(
-        np.ascontiguousarray(frame[rows[0] : rows[1] + 1, columns[0] : columns[1]]),
-        cv2.COLOR_RGB2GRAY,
-    )
-    profile = np.median(strip, axis=1).astype(np.float32).reshape(-1, 1)
-    return np.asarray(cv2.GaussianBlur(profile, (1, 3), 0), np.float32).ravel()
 
 
 def snap_tops(
@@ -77,23 +53,49 @@ def snap_tops(
     live picture's side (its middle is not the car's), or under `min_height` pixels tall (a few
     rows of a far car's roof and window blur into one edge) keeps its top."""
     out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
-    lx0, ly0, lx1, ly1 = live
+    lx0, _, lx1, _ = live
     for box in out:
         x0, y0, x1, y1 = box
-        width, height = x1 - x0, y1 - y0
-        top = int(max(ly0, round(y0 - reach[0] * height)))
-        bottom = int(min(ly1 - 1, round(y0 + reach[1] * height)))
-        left = int(max(lx0, round(x0 + margin * width)))
-        right = int(min(lx1, round(x1 - margin * width)))
-        cut = x0 <= lx0 + 1 or x1 >= lx1 - 1
-        if height < min_height or cut or bottom - top < 4 or right - left < 4:
+        if y1 - y0 < min_height or x0 <= lx0 + 1 or x1 >= lx1 - 1:
             continue
-        profile = _row_profile(frame, (top, bottom), (left, right))
-        change = np.abs(profile[2:] - profile[:-2])  # at rows top + 1 .. bottom - 1
-        row = int(np.argmax(change))
-        if change[row] >= min_change:
-            box[1] = float(top + 1 + row)
+        found = _strongest_row(frame, box, y0, reach, margin, live, signed=False)
+        if found is not None and found[1] >= min_change:
+            box[1] = float(found[0])
     return out
+
+
+def _strongest_row(
+    frame: NDArray[np.uint8],
+    box: NDArray[np.float64],
+    row: float,
+    reach: tuple[float, float],
+    margin: float,
+    live: tuple[int, int, int, int],
+    signed: bool,
+) -> tuple[int, float] | None:
+    """The row near `row` (from `reach[0]` of the box's height above it to `reach[1]` below,
+    inside `live`) where the median grey level across the box's middle (less `margin` of its
+    width at each side) brightens most going down (`signed`) or changes most either way, and
+    that change; None where the strip is too small to say."""
+    x0, y0, x1, y1 = box
+    lx0, ly0, lx1, ly1 = live
+    width, height = x1 - x0, y1 - y0
+    top = int(max(ly0, round(row - reach[0] * height)))
+    bottom = int(min(ly1 - 1, round(row + reach[1] * height)))
+    left = int(max(lx0, round(x0 + margin * width)))
+    right = int(min(lx1, round(x1 - margin * width)))
+    if bottom - top < 4 or right - left < 4:
+        return None
+    strip = cv2.cvtColor(
+        np.ascontiguousarray(frame[top : bottom + 1, left:right]), cv2.COLOR_RGB2GRAY
+    )
+    profile = np.median(strip, axis=1).astype(np.float32).reshape(-1, 1)
+    profile = np.asarray(cv2.GaussianBlur(profile, (1, 3), 0), np.float32).ravel()
+    change = profile[2:] - profile[:-2]  # at rows top + 1 .. bottom - 1
+    if not signed:
+        change = np.abs(change)
+    best = int(np.argmax(change))
+    return top + 1 + best, float(change[best])
 
 
 def reach_toward(
