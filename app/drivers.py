@@ -96,17 +96,18 @@ def calibration_for(
     """The calibration to undistort `name`'s frames of `size` with: `calibration` where it fits.
     Frames of another aspect ratio come from another camera: without a calibration the user
     named (`required`) they are processed without undistortion, and `log` says so; with one,
-    `CalibrationMismatch` says it does not fit. Frames of another size with the shipped
-    calibration's aspect ratio are undistorted with it scaled, and `log` says so: most dashcams
-    film 16:9, and another camera's footage needs `--calibration none` or its own."""
+    `CalibrationMismatch` says it does not fit. Frames of another size with the aspect ratio of
+    a calibration the user did not name (the shipped one; a still's any) are undistorted with it
+    scaled, and `log` says so: most dashcams film 16:9, and another camera's footage needs
+    `--calibration none` or its own."""
     if calibration is None or required:
         return calibration
     cw, ch = calibration.image_size
     if fits(calibration, size):
         if tuple(size) != (cw, ch):
             log(
-                f"note: {name} is {size[0]}x{size[1]}, undistorted with the shipped dashcam's "
-                f"calibration scaled from {cw}x{ch} (for footage of another camera pass "
+                f"note: {name} is {size[0]}x{size[1]}, undistorted with the {cw}x{ch} camera's "
+                "calibration scaled to it (for footage of another camera pass "
                 "--calibration none, or --calibration FILE of that camera)"
             )
         return calibration

@@ -59,7 +59,7 @@ def test_other_resolution_same_aspect_is_scaled(clips: dict[str, Path], tmp_path
     result = run_cli("process", clips["small"], "-o", out)
     assert result.returncode == 0, result.stderr
     # Said, as most dashcams film 16:9: another camera's footage needs --calibration none.
-    assert "calibration scaled from 1280x720" in result.stderr
+    assert "1280x720 camera's calibration scaled" in result.stderr
     assert "--calibration none" in result.stderr
     info, frames = count_frames(out)
     assert info.size == (640, 360) and frames == 10
