@@ -287,7 +287,7 @@ def process_command(
 
     check_input(source)
     keep_left = _keep_left(traffic)
-    _max_size(max_size)
+    max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
     cal = _calibration(calibration)

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
-from app.drivers import calibration_for, check_camera_height, check_horizon
+from app.drivers import calibration_for, check_camera_height, video_horizon
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -21,7 +21,6 @@ from app.sources import (
     decoding_notes,
     probe_video,
     read_frames,
-    reduced_row,
     within_size,
 )
 from camera_cal import SceneGeometry
@@ -192,8 +191,7 @@ def run_debug(
     if first >= info.n_frames:
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
-    check_horizon(pipeline.horizon_y, info.reduced_from or info.size)
-    pipeline.horizon_y = reduced_row(pipeline.horizon_y, info)
+    pipeline.horizon_y = video_horizon(pipeline.horizon_y, info)
     check_camera_height(pipeline.camera_height_m)
     ensure_writable_dir(out_dir)
     start = max(0, first - round(WARMUP_S * info.fps))

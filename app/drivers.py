@@ -21,6 +21,7 @@ from app.record import frame_record
 from app.runtime import warm_up_opencv
 from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
 from app.sources import (
+    VideoInfo,
     decoding_notes,
     prefetch,
     probe_video,
@@ -84,6 +85,13 @@ def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
             f"--horizon {horizon_y:g} is outside the frame ({size[1]} rows); "
             f"pass a row from 0 to {size[1] - 1}"
         )
+
+
+def video_horizon(horizon_y: float | None, info: VideoInfo) -> float | None:
+    """A user's horizon, a row of the video as stored (checked against its rows), as a row of
+    the frames processed (`within_size` may have reduced them)."""
+    check_horizon(horizon_y, info.reduced_from or info.size)
+    return reduced_row(horizon_y, info)
 
 
 def calibration_for(
@@ -155,8 +163,7 @@ def process_video(
     try:
         info = within_size(probe_video(source), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
-        check_horizon(horizon_y, info.reduced_from or info.size)
-        horizon_y = reduced_row(horizon_y, info)
+        horizon_y = video_horizon(horizon_y, info)
         check_camera_height(camera_height_m)
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
