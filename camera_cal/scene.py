@@ -3,12 +3,13 @@
 A dashcam's picture may carry black bars (a 4:3 sensor in a 16:9 file, a letterbox), a bonnet
 at its bottom and burnt-in captions, and its horizon sits wherever the camera's height and pitch
 put it. All are read off the frames: bars are rows and columns that stay black in every frame
-seen; a bonnet is the band of bottom rows that stays still while the road above it streams past;
-captions are dense patches of edges that stay in place, and a mirror or pillar a still patch
-they outline (`camera_cal.overlay`); the horizon is the row of the vanishing point of the road's
-straight edges (lane lines, kerbs, barriers), the median over recent frames, and the caller's
-default until there is enough evidence. The road's lightness ahead (dusk, night) is read off the
-same frames.
+seen (but not a black night sky: the road's lines meet at its lower edge); a bonnet is the band
+of bottom rows that stays still while the road above it streams past; captions are dense
+patches of edges that stay in place, and a mirror or pillar a still patch they outline
+(`camera_cal.overlay`); the horizon is the row of the vanishing point of the road's straight
+edges (lane lines, kerbs, barriers; on a dim picture, weaker edges), the median over recent
+frames, and the caller's default until there is enough evidence. The road's lightness ahead
+(dusk, night) is read off the same frames.
 """
 
 from __future__ import annotations
@@ -127,18 +128,29 @@ def bonnet_row(
     return int(rows[found[0]]) if len(found) else None
 
 
+def edge_gain(part: NDArray[np.uint8], paint_grey: float = 100.0, floor: float = 0.3) -> float:
+    """How strong the edges of a dim picture are against daylight's: its brightest paint (the
+    99.9th percentile) over `paint_grey`, from `floor` to 1. Lines a third as bright as by day
+    (dusk, night, a dark sensor) give edges a third as strong."""
+    counts = np.bincount(part.ravel(), minlength=256)
+    brightest = int(np.searchsorted(np.cumsum(counts), 0.999 * part.size))
+    return float(np.clip(brightest / paint_grey, floor, 1.0))
+
+
 def road_segments(
     grey: NDArray[np.uint8], live: Box, top: int, hidden: tuple[Box, ...] = ()
 ) -> NDArray[np.float64]:
     """Straight edge segments (x1, y1, x2, y2) below row `top` inside the live box and outside
     the `hidden` boxes (captions), slanted 20-75 degrees from the horizontal as the road's edges
-    are seen ahead."""
+    are seen ahead. Edges are thresholded in proportion to the picture's brightness
+    (`edge_gain`): by day at fixed strengths, on a dim picture at weaker ones."""
     x0, y0, x1, y1 = live
     top = max(top, y0)
     if y1 - top < 16 or x1 - x0 < 16:
         return np.empty((0, 4))
     part = cv2.GaussianBlur(grey[top:y1, x0:x1], (5, 5), 0)
-    edges = cv2.Canny(part, 60, 150)
+    gain = edge_gain(part)
+    edges = cv2.Canny(part, 60 * gain, 150 * gain)
     # Bar edges and the picture's border are no road edges; nor are a caption's letters.
     edges[:, :3] = edges[:, -3:] = 0
     edges[-3:] = 0
@@ -284,6 +296,9 @@ class SceneTracker:
         self._previous: NDArray[np.int16] | None = None
         self._bonnet: int | None = None
         self._samples = 0
+        # Vanishing points above a black top band, and whether the band was found to be sky.
+        self._sky_votes: deque[tuple[float, float]] = deque(maxlen=window)
+        self._sky_top = False
         # Captions and the horizon are measured on the picture at most MEASURE_WIDTH wide.
         self._scale = min(1.0, MEASURE_WIDTH / size[0])
         self._small = (max(1, round(size[0] * self._scale)), max(1, round(size[1] * self._scale)))
@@ -302,7 +317,8 @@ class SceneTracker:
         """The box inside the bars."""
         if not self._count:
             return 0, 0, self.size[0], self.size[1]
-        return live_box(self._row_max, self._col_max)
+        x0, y0, x1, y1 = live_box(self._row_max, self._col_max)
+        return x0, 0 if self._sky_top else y0, x1, y1
 
     def _box(self) -> Box:
         """The live box: inside the bars and above the bonnet."""
@@ -445,5 +461,16 @@ class SceneTracker:
         if point is None:
             return
         x, y = point
-        if x0 <= x < x1 and y0 + 0.15 * h <= y <= y0 + 0.8 * h:
-            self._estimates.append((float(x) / scale, float(y) / scale))
+        if not x0 <= x < x1:
+            return
+        estimate = (float(x) / scale, float(y) / scale)
+        if y0 + 0.15 * h <= y <= y0 + 0.8 * h:
+            self._estimates.append(estimate)
+        elif y0 > 0 and 0.15 * y1 <= y < y0 + 0.15 * h and not self._sky_top:
+            # The road's lines meet in or just under a black band at the top: no bar leaves
+            # the horizon there, a night sky does. Once the band's votes outnumber the
+            # estimates, it is picture (and the votes are estimates).
+            self._sky_votes.append(estimate)
+            if len(self._sky_votes) >= max(self.min_estimates, len(self._estimates) + 1):
+                self._sky_top = True
+                self._estimates.extend(self._sky_votes)
