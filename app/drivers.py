@@ -30,7 +30,7 @@ from app.sources import (
     reduced_row,
     within_size,
 )
-from camera_cal import Calibration, fits
+from camera_cal import Calibration, fits, monochrome
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
 
@@ -92,6 +92,13 @@ def video_horizon(horizon_y: float | None, info: VideoInfo) -> float | None:
     the frames processed (`within_size` may have reduced them)."""
     check_horizon(horizon_y, info.reduced_from or info.size)
     return reduced_row(horizon_y, info)
+
+
+# Told when a video has no colour: the vehicle classifier learned colour footage (README).
+MONOCHROME_NOTE = (
+    "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
+    "(README, Known weaknesses); the lanes are unaffected"
+)
 
 
 def calibration_for(
@@ -206,6 +213,8 @@ def process_video(
         decoded = prefetch(read_frames(source, info, first, last if end_s is not None else None))
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
+            if offset == 0 and vehicles is not None and monochrome(out.undistorted):
+                log(f"note: {source.name} is {MONOCHROME_NOTE}")
             if video is not None:
                 video.write(compose(out.undistorted, out.result, annotators))
             if records is not None:

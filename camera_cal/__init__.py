@@ -11,7 +11,13 @@ from camera_cal.calibration import (
     load_calibration,
     save_calibration,
 )
-from camera_cal.scene import GroundScale, SceneGeometry, SceneTracker, horizon_estimates
+from camera_cal.scene import (
+    GroundScale,
+    SceneGeometry,
+    SceneTracker,
+    horizon_estimates,
+    monochrome,
+)
 from camera_cal.undistort import (
     CalibrationMismatch,
     Undistorter,
@@ -37,5 +43,6 @@ __all__ = [
     "fits",
     "horizon_estimates",
     "load_calibration",
+    "monochrome",
     "save_calibration",
 ]

@@ -64,6 +64,16 @@ def road_grey(grey: NDArray[np.uint8], live: Box, horizon_y: float) -> float:
     return float(np.median(patch)) if patch.size else 0.0
 
 
+def monochrome(rgb: NDArray[np.uint8], tolerance: int = 6, max_share: float = 0.005) -> bool:
+    """Whether a picture carries no colour (an infrared night camera's, a grey-only export):
+    under `max_share` of its pixels (every 8th row and column) have channels more than
+    `tolerance` grey levels apart (the codec's rounding leaves a few; a coloured caption on a
+    grey picture stays under the share, a night sky's blue does not)."""
+    sample = rgb[::8, ::8].astype(np.int16)
+    spread = sample.max(axis=2) - sample.min(axis=2)
+    return bool(np.mean(spread > tolerance) < max_share)
+
+
 def scale_height(live_size: tuple[int, int]) -> float:
     """The height of the 16:9 picture a live box of `live_size` (width, height) is taken to be
     cut from: its longer side spans the 16:9 width or its shorter side the height, whichever

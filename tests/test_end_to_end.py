@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from app.drivers import MONOCHROME_NOTE
 from app.sources import ffmpeg_binary, probe_video, read_frames
 from camera_cal import default_calibration_path
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
@@ -20,7 +21,7 @@ from tests.helpers import assert_one_line_error, count_frames, read_record, run_
 
 @pytest.fixture(scope="module")
 def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str, Path]:
-    """Short derived clips: other sizes, a truncated file, an empty one."""
+    """Short derived clips: other sizes, a grey one, a truncated file, an empty one."""
     folder = tmp_path_factory.mktemp("clips")
     out = {}
     # The 960x540 clip is longer: without a calibration the stages wait for the horizon first.
@@ -30,6 +31,7 @@ def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[st
         ("small", "640:360,setsar=1", "0.4"),
         ("wide960", "960:540,setsar=1", "1.2"),
         ("square", "640:480,setsar=1", "0.4"),
+        ("grey", "640:360,setsar=1,hue=s=0", "0.4"),
     ):
         out[name] = folder / f"{name}.mp4"
         subprocess.run(
@@ -61,8 +63,22 @@ def test_other_resolution_same_aspect_is_scaled(clips: dict[str, Path], tmp_path
     # Said, as most dashcams film 16:9: another camera's footage needs --calibration none.
     assert "1280x720 camera's calibration scaled" in result.stderr
     assert "--calibration none" in result.stderr
+    assert "monochrome" not in result.stderr
     info, frames = count_frames(out)
     assert info.size == (640, 360) and frames == 10
+
+
+def test_a_monochrome_video_is_told_of(clips: dict[str, Path], tmp_path: Path) -> None:
+    """A grey copy (as an infrared night camera films): processed, with one note that the
+    vehicle classifier learned colour footage; without the vehicle stage there is nothing to
+    say."""
+    result = run_cli("process", clips["grey"], "-o", tmp_path / "o.mp4")
+    assert result.returncode == 0, result.stderr
+    assert [line for line in result.stderr.splitlines() if "monochrome" in line] == [
+        f"note: grey.mp4 is {MONOCHROME_NOTE}"
+    ]
+    quiet = run_cli("process", clips["grey"], "-o", tmp_path / "p.mp4", "--no-vehicles")
+    assert quiet.returncode == 0 and "monochrome" not in quiet.stderr
 
 
 def test_other_camera_with_calibration_none(clips: dict[str, Path], tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ from camera_cal.scene import (
     bonnet_row,
     edge_gain,
     live_box,
+    monochrome,
     road_grey,
     road_segments,
     scale_height,
@@ -117,6 +118,22 @@ def test_the_horizon_of_a_darkened_night_clip(wild_dir: Path) -> None:
     darker = np.clip(255 * (np.arange(256) / 255) ** (1 / 0.55) - 20, 0, 255).astype(np.uint8)
     plain = _final_horizon(clip, lambda f: f)
     assert abs(_final_horizon(clip, lambda f: darker[f]) - plain) <= 0.01 * 360
+
+
+def test_a_picture_without_colour_is_monochrome() -> None:
+    """Grey with the codec's rounding, even under a small coloured caption, is monochrome; a
+    road in colour is not, nor a night picture whose only colour is a dark blue sky."""
+    rng = np.random.default_rng(5)
+    grey = np.repeat(rng.integers(0, 200, (360, 640, 1)), 3, axis=2)
+    grey = np.clip(grey + rng.integers(-2, 3, grey.shape), 0, 255).astype(np.uint8)
+    assert monochrome(grey)
+    captioned = grey.copy()
+    captioned[8:20, 8:60] = (255, 200, 0)
+    assert monochrome(captioned)
+    assert not monochrome(_road((640, 360), (320.0, 170.0)))
+    night = np.zeros((360, 640, 3), np.uint8)
+    night[:100] = (0, 0, 40)
+    assert not monochrome(night)
 
 
 def _final_horizon(video: Path, change: Callable[[Frame], Frame], frames: int = 90) -> float:
