@@ -154,7 +154,8 @@ def process_video(
     max_size: int = 0,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
-    only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square).
+    only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square;
+    and, with the vehicle stage, a video without colour).
     A `calibration` of another aspect ratio is refused if `calibration_required`, else left out
     (see `calibration_for`).
 

@@ -9,7 +9,7 @@ patches of edges that stay in place, and a mirror or pillar a still patch they o
 (`camera_cal.overlay`); the horizon is the row of the vanishing point of the road's straight
 edges (lane lines, kerbs, barriers; on a dim picture, weaker edges), the median over recent
 frames, and the caller's default until there is enough evidence. The road's lightness ahead
-(dusk, night) is read off the same frames.
+(dusk, night), and whether a picture has colour at all, are read off the same frames.
 """
 
 from __future__ import annotations
