@@ -124,14 +124,34 @@ def output_camera_matrix(calibration: Calibration, size: tuple[int, int]) -> NDA
     return zoomed(low)
 
 
-def build_undistorter(calibration: Calibration, size: tuple[int, int]) -> Undistorter:
-    """Precompute fixed-point remap maps for frames of `size` (width, height)."""
-    lens = scaled_camera_matrix(calibration, size)
-    matrix = output_camera_matrix(calibration, size)
+def build_undistorter(
+    calibration: Calibration | None, size: tuple[int, int], roll_deg: float = 0.0
+) -> Undistorter:
+    """Precompute fixed-point remap maps for frames of `size` (width, height): undistorted by
+    `calibration` (None: a lens without distortion) and levelled, for a camera mounted turned
+    about its axis so that the picture is turned `roll_deg` degrees anticlockwise (its horizon
+    rising to the right), by turning it back about the principal point (no cost per frame)."""
+    if calibration is None:  # turned about the centre (the focal length plays no part)
+        cx, cy = (size[0] - 1) / 2, (size[1] - 1) / 2
+        lens = np.array([[size[1], 0.0, cx], [0.0, size[1], cy], [0.0, 0.0, 1.0]])
+        matrix, distortion = lens, np.zeros(5)
+    else:
+        lens = scaled_camera_matrix(calibration, size)
+        matrix, distortion = output_camera_matrix(calibration, size), calibration.dist_coeffs
     map1, map2 = cv2.initUndistortRectifyMap(
-        lens, calibration.dist_coeffs, None, matrix, size, cv2.CV_16SC2
+        lens, distortion, level_rotation(roll_deg), matrix, size, cv2.CV_16SC2
     )
     return Undistorter(size=size, camera_matrix=matrix, map1=map1, map2=map2)
+
+
+def level_rotation(roll_deg: float) -> NDArray[np.float64] | None:
+    """The rotation about the optical axis that turns a picture turned `roll_deg` degrees
+    anticlockwise back to level (x right, y down: a positive angle turns it clockwise on the
+    screen); None for none."""
+    if roll_deg == 0:
+        return None
+    a = np.radians(roll_deg)
+    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
 
 
 def calibrated_scale_height(calibration: Calibration, size: tuple[int, int]) -> float:

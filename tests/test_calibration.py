@@ -113,6 +113,44 @@ def test_undistortion_inverts_known_distortion() -> None:
     assert distances.max() < 1.0
 
 
+def test_a_turned_picture_is_levelled_about_the_principal_point() -> None:
+    """A camera mounted turned about its axis: dots on a level grid, turned 4 degrees
+    anticlockwise about the principal point (with the lens's distortion, or without a lens),
+    come back to the grid with `roll_deg` 4; with -4 they turn further, and 0 changes nothing."""
+    size = (640, 360)
+    matrix = np.array([[580.0, 0, 300], [0, 580.0, 170], [0, 0, 1]])
+    dist = np.array([-0.28, 0.09, 0.0, 0.0, -0.02])
+    cal = Calibration(camera_matrix=matrix, dist_coeffs=dist, image_size=size)
+    xs, ys = np.meshgrid(np.linspace(80, 560, 7), np.linspace(50, 310, 5))
+    truth = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    a = np.radians(4.0)
+    turn = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])  # anticlockwise, y down
+
+    def found(image: np.ndarray) -> np.ndarray:
+        _, _, _, centroids = cv2.connectedComponentsWithStats((image[:, :, 0] > 60).astype("u1"))
+        return np.asarray(centroids[1:])
+
+    def error(points: np.ndarray) -> float:
+        return float(np.linalg.norm(points[:, None] - truth[None], axis=2).min(axis=1).max())
+
+    for lens in (cal, None):
+        centre = matrix[:2, 2] if lens is not None else (np.array(size) - 1) / 2
+        turned = (truth - centre) @ turn.T + centre
+        if lens is not None:  # where each turned point lands in the distorted photo
+            rays = cv2.undistortPoints(turned.reshape(-1, 1, 2), matrix, None).reshape(-1, 2)
+            rays = np.hstack([rays, np.ones((len(rays), 1))])
+            turned = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), matrix, dist)[0]
+        photo = np.dstack([_dot_image(turned.reshape(-1, 2), size)] * 3)
+        level = found(build_undistorter(lens, size, 4.0)(photo))
+        assert len(level) == len(truth) and error(level) < 1.0
+        assert error(found(build_undistorter(lens, size, -4.0)(photo))) > 20
+    plain = np.dstack([_dot_image(truth, size)] * 3)
+    np.testing.assert_array_equal(
+        build_undistorter(cal, size, 0.0).map1, build_undistorter(cal, size).map1
+    )
+    assert error(found(build_undistorter(None, size, 0.0)(plain))) < 0.5
+
+
 def test_undistortion_in_stripes_is_one_remap_of_the_whole_frame() -> None:
     # A height that is no multiple of the stripes, a strong lens: the same pixels as OpenCV's
     # one call over the frame.
