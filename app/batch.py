@@ -57,6 +57,7 @@ class BatchOptions:
     camera_height_m: float | None = None  # the cameras' height over the road (see `process`)
     keep_left: bool = False  # the footage's traffic keeps left (see `process --traffic`)
     max_size: int = 0  # videos with a longer shorter side are processed at it (see `process`)
+    roll_deg: float = 0.0  # the cameras' pictures turned anticlockwise (see `process --roll`)
 
 
 @dataclass(frozen=True)
@@ -202,6 +203,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         camera_height_m=options.camera_height_m,
         keep_left=options.keep_left,
         max_size=options.max_size,
+        roll_deg=options.roll_deg,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]

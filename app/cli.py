@@ -64,6 +64,16 @@ CameraHeightOption = Annotated[
         "vehicle search for it (default: a car's, 1.24 m).",
     ),
 ]
+RollOption = Annotated[
+    float,
+    typer.Option(
+        "--roll",
+        metavar="DEG",
+        help="The picture's tilt from a camera mounted askew, in degrees: positive when it is "
+        "turned anticlockwise (the horizon rises to the right). The frames are levelled, the "
+        "output and the record too.",
+    ),
+]
 
 # Video larger than 1080p is processed at 1080p: the stages read no more from more pixels (the
 # lanes keep a 720-row view, the vehicle bands are shrunk to their windows' model size) and 4K
@@ -277,6 +287,7 @@ def process_command(
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
+    roll: RollOption = 0.0,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -308,6 +319,7 @@ def process_command(
             horizon_y=horizon,
             camera_height_m=camera_height,
             keep_left=keep_left,
+            roll_deg=roll,
         )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
@@ -327,6 +339,7 @@ def process_command(
             camera_height_m=camera_height,
             keep_left=keep_left,
             max_size=max_size,
+            roll_deg=roll,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -361,12 +374,14 @@ def batch_command(
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
+    roll: RollOption = 0.0,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
-    from app.drivers import check_camera_height
+    from app.drivers import check_camera_height, check_roll
 
     check_camera_height(camera_height)
+    check_roll(roll)
     keep_left = _keep_left(traffic)
     entries = find_inputs(inputs)
     if not entries:
@@ -381,6 +396,7 @@ def batch_command(
         camera_height_m=camera_height,
         keep_left=keep_left,
         max_size=_max_size(max_size),
+        roll_deg=roll,
     )
     summary = run_batch(
         entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
@@ -404,6 +420,7 @@ def debug_command(
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
+    roll: RollOption = 0.0,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -424,6 +441,7 @@ def debug_command(
         horizon_y=horizon,
         camera_height_m=camera_height,
         keep_left=_keep_left(traffic),
+        roll_deg=roll,
     )
     written = run_debug(
         source,
@@ -475,14 +493,17 @@ def report_command(
         typer.Option(help="The video the record was made from, for a thumbnail per event."),
     ] = None,
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
+    roll: RollOption = 0.0,
 ) -> None:
     """Write a self-contained HTML report: plots over time and the events with thumbnails."""
+    from app.drivers import check_roll
     from app.events import find_events, signals_from_record
     from app.outputs import check_report_output
     from app.record import read_record
     from app.report import event_thumbnails, read_events, report_html
     from app.sinks import atomic_output
 
+    check_roll(roll)
     output = output if output is not None else record.with_name(f"{record.stem}_report.html")
     check_report_output(output, [p for p in (record, events, video) if p is not None])
     rows = list(read_record(record))
@@ -495,7 +516,7 @@ def report_command(
         source = f"found from {record.name}"
     thumbnails = {}
     if video is not None:
-        thumbnails = event_thumbnails(video, rows, found, _calibration(calibration))
+        thumbnails = event_thumbnails(video, rows, found, _calibration(calibration), roll)
     elif found:
         typer.echo("note: no --video given; the events have no thumbnails", err=True)
     page = report_html(f"roadview report: {record.name}", rows, found, thumbnails, source)

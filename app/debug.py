@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
-from app.drivers import calibration_for, check_camera_height, video_horizon
+from app.drivers import calibration_for, check_camera_height, check_roll, video_horizon
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -193,6 +193,7 @@ def run_debug(
     last = min(last, info.n_frames)
     pipeline.horizon_y = video_horizon(pipeline.horizon_y, info)
     check_camera_height(pipeline.camera_height_m)
+    check_roll(pipeline.roll_deg)
     ensure_writable_dir(out_dir)
     start = max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)

@@ -78,6 +78,21 @@ def check_camera_height(height_m: float | None) -> None:
         )
 
 
+# How far a user may say the picture is turned, in degrees: a dashcam mounted askew, not one
+# on its side (a phone held upright is turned by its rotation tag).
+MAX_ROLL_DEG = 30.0
+
+
+def check_roll(roll_deg: float) -> None:
+    """A user's roll must be a tilt a mounted dashcam can have."""
+    if not abs(roll_deg) <= MAX_ROLL_DEG:
+        raise InputError(
+            f"--roll {roll_deg:g} is not a dashcam's tilt; pass degrees from "
+            f"{-MAX_ROLL_DEG:g} to {MAX_ROLL_DEG:g} (positive: the picture turned anticlockwise, "
+            "its horizon rising to the right)"
+        )
+
+
 def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
     """A user's horizon row must lie inside the frame."""
     if horizon_y is not None and not 0 <= horizon_y < size[1]:
@@ -152,6 +167,7 @@ def process_video(
     camera_height_m: float | None = None,
     keep_left: bool = False,
     max_size: int = 0,
+    roll_deg: float = 0.0,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square;
@@ -164,6 +180,7 @@ def process_video(
     `horizon_y` fixes the horizon row instead of estimating it from the footage;
     `camera_height_m` (metres over the road) sizes the vehicle search for a camera that high;
     `keep_left` is for traffic keeping left (the vehicle stage sees the frames mirrored);
+    `roll_deg` levels a picture turned that many degrees anticlockwise (the output too);
     a video whose shorter side exceeds `max_size` pixels (0: none) is processed and written at
     that size (`within_size`; `horizon_y` is a row of the video as stored).
     """
@@ -173,6 +190,7 @@ def process_video(
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
         horizon_y = video_horizon(horizon_y, info)
         check_camera_height(camera_height_m)
+        check_roll(roll_deg)
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
         calibration = calibration_for(
@@ -193,6 +211,7 @@ def process_video(
             horizon_y,
             camera_height_m,
             keep_left,
+            roll_deg,
         ) as pipeline,
         ExitStack() as sinks,
     ):
@@ -257,6 +276,7 @@ def process_still(
     horizon_y: float | None = None,
     camera_height_m: float | None = None,
     keep_left: bool = False,
+    roll_deg: float = 0.0,
 ) -> RunSummary:
     """Process one still into an annotated image (and a one-line record).
 
@@ -267,6 +287,7 @@ def process_still(
     size = (image.shape[1], image.shape[0])
     check_horizon(horizon_y, size)
     check_camera_height(camera_height_m)
+    check_roll(roll_deg)
     started = time.perf_counter()
     calibration = calibration_for(calibration, size, source.name, False, log)
     with Pipeline(
@@ -276,6 +297,7 @@ def process_still(
         horizon_y=horizon_y,
         camera_height_m=camera_height_m,
         keep_left=keep_left,
+        roll_deg=roll_deg,
     ) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)

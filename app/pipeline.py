@@ -102,6 +102,8 @@ class Pipeline:
     forked worker process. A frame of another size raises `FrameSizeChanged`. Use it as a context
     manager, or call `close`, to stop the worker. With `keep_left` (traffic keeping left) the
     vehicle stage sees every frame mirrored and its boxes come back mirrored (app/traffic.py).
+    With `roll_deg` (a camera mounted turned about its axis: the picture turned that many
+    degrees anticlockwise) the undistorted frames are levelled, and all that follows is too.
     """
 
     def __init__(
@@ -113,8 +115,10 @@ class Pipeline:
         horizon_y: float | None = None,
         camera_height_m: float | None = None,
         keep_left: bool = False,
+        roll_deg: float = 0.0,
     ) -> None:
         self.calibration = calibration
+        self.roll_deg = roll_deg  # the picture's turn the user states; levelled with the lens
         self.horizon_y = horizon_y  # the user's horizon row; None: estimated from the footage
         # The user's camera height over the road (sizes the vehicle windows); None: a car's.
         self.camera_height_m = camera_height_m
@@ -163,7 +167,9 @@ class Pipeline:
         Raises `camera_cal.CalibrationMismatch` when the calibration does not fit the size.
         """
         self._undistorter = (
-            build_undistorter(self.calibration, size) if self.calibration is not None else None
+            build_undistorter(self.calibration, size, self.roll_deg)
+            if self.calibration is not None or self.roll_deg
+            else None
         )
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.

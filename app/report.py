@@ -321,9 +321,10 @@ def event_thumbnails(
     rows: Sequence[Mapping[str, Any]],
     events: Sequence[Event],
     calibration: Calibration | None,
+    roll_deg: float = 0.0,
 ) -> dict[int, str]:
-    """A thumbnail per event: the video's frame in the middle of the event, undistorted as
-    `process` did, with the involved vehicle's box from the record."""
+    """A thumbnail per event: the video's frame in the middle of the event, undistorted (and
+    levelled by `roll_deg`) as `process` did, with the involved vehicle's box from the record."""
     info = probe_video(video)
     size = tuple(rows[0].get("size", info.size))
     if tuple(info.size) != size:
@@ -331,10 +332,9 @@ def event_thumbnails(
             f"--video {video} is {info.size[0]}x{info.size[1]} but the record's frames are "
             f"{size[0]}x{size[1]}; pass the video the record was made from"
         )
+    lens = calibration if calibration is not None and fits(calibration, info.size) else None
     undistort = (
-        build_undistorter(calibration, info.size)
-        if calibration is not None and fits(calibration, info.size)
-        else None
+        build_undistorter(lens, info.size, roll_deg) if lens is not None or roll_deg else None
     )
     by_frame = {int(r["frame"]): r for r in rows}
     thumbnails = {}
