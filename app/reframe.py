@@ -48,7 +48,9 @@ class Framing:
     moving half as far a frame; 0.5: every other frame); `mirror`: then flip it left to right
     (a road where traffic keeps right, seen as one where it keeps left); `keep_left`: roadview
     is told so (`--traffic left`); `light`: every pixel value times this (0.4: dusk, the
-    asphalt at about 30 grey levels)."""
+    asphalt at about 30 grey levels); `roll`: last, the picture turned this many degrees
+    anticlockwise about its centre, as by a camera mounted askew, and roadview told so
+    (`--roll`): its output is levelled back, so the labels stay where they are."""
 
     name: str
     crop: Box | None = None
@@ -58,6 +60,7 @@ class Framing:
     mirror: bool = False
     keep_left: bool = False
     light: float = 1.0
+    roll: float = 0.0
 
     @property
     def unchanged(self) -> bool:
@@ -69,6 +72,7 @@ class Framing:
             and self.rate == 1
             and not self.mirror
             and self.light == 1
+            and self.roll == 0
         )
 
     def source_frame(self, frame: int) -> int:
@@ -122,8 +126,9 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     """The framings of issue #15 for a `source`-sized clip: as it is, horizon 10 % of the height
     higher (crop the top) and lower (pad the top, crop the bottom), a narrower field of view (the
     middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes and half the size
-    (many phones' and dashcams' small copies), half and twice the frame rate, and mirrored
-    (traffic keeping left, as in the UK, India or Japan)."""
+    (many phones' and dashcams' small copies), half and twice the frame rate, mirrored
+    (traffic keeping left, as in the UK, India or Japan), and turned 3 degrees (a camera
+    mounted askew, levelled by `--roll`)."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)
@@ -142,6 +147,7 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("twice the frame rate", rate=2.0),
         Framing("mirrored", mirror=True),
         Framing("mirrored, --traffic left", mirror=True, keep_left=True),
+        Framing("turned 3°, --roll 3", roll=3.0),
     )
 
 
@@ -187,6 +193,10 @@ def reframe_image(frame: Frame, framing: Framing) -> Frame:
         out = out[:, ::-1]
     if framing.light != 1:
         out = cv2.convertScaleAbs(out, alpha=framing.light)
+    if framing.roll:
+        h, w = out.shape[:2]
+        turn = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), framing.roll, 1.0)
+        out = cv2.warpAffine(out, turn, (w, h), flags=cv2.INTER_LINEAR)
     return np.ascontiguousarray(out)
 
 
@@ -301,6 +311,7 @@ def framing_scores(
         record=record,
         vehicles_in_worker=False,
         keep_left=framing.keep_left,
+        roll_deg=framing.roll,
     )
     truth = retime_labels(load_labels_document(document), framing, info.n_frames)
     frames = list(read_record(record))
