@@ -17,11 +17,12 @@ import socket
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from app.errors import USER_ERRORS, InputError, Interrupted, describe
+from app.mounting import Mounting
 from app.progress import Progress
 from app.sinks import atomic_output
 
@@ -54,10 +55,9 @@ class BatchOptions:
     # without undistortion (see `app.drivers.calibration_for`).
     calibration_required: bool = True
     model: str | None = None  # None: the shipped model
-    camera_height_m: float | None = None  # the cameras' height over the road (see `process`)
-    keep_left: bool = False  # the footage's traffic keeps left (see `process --traffic`)
+    # The cameras' height, the traffic's side and the pictures' turn (see `process`).
+    mounting: Mounting = field(default_factory=Mounting)
     max_size: int = 0  # videos with a longer shorter side are processed at it (see `process`)
-    roll_deg: float = 0.0  # the cameras' pictures turned anticlockwise (see `process --roll`)
 
 
 @dataclass(frozen=True)
@@ -200,10 +200,8 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         default_annotators(),
         vehicles_in_worker=False,
         calibration_required=options.calibration_required,
-        camera_height_m=options.camera_height_m,
-        keep_left=options.keep_left,
         max_size=options.max_size,
-        roll_deg=options.roll_deg,
+        mounting=options.mounting,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]

@@ -14,6 +14,7 @@ import typer
 from numpy.typing import NDArray
 
 from app.errors import USER_ERRORS, InputError, Interrupted, describe
+from app.mounting import Mounting, check_mounting, check_roll
 from app.runtime import tune_process
 from camera_cal import (
     Calibration,
@@ -297,7 +298,7 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
-    keep_left = _keep_left(traffic)
+    mounting = Mounting(horizon, camera_height, _keep_left(traffic), roll)
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
@@ -316,10 +317,7 @@ def process_command(
             record,
             annotators,
             log=lambda m: typer.echo(m, err=True),
-            horizon_y=horizon,
-            camera_height_m=camera_height,
-            keep_left=keep_left,
-            roll_deg=roll,
+            mounting=mounting,
         )
     else:
         # Vehicles run in a worker process beside the lanes, one frame ahead of the compositor.
@@ -333,13 +331,10 @@ def process_command(
             start,
             end,
             events_file=events,
-            horizon_y=horizon,
             log=lambda m: typer.echo(m, err=True),
             calibration_required=_named(calibration),
-            camera_height_m=camera_height,
-            keep_left=keep_left,
             max_size=max_size,
-            roll_deg=roll,
+            mounting=mounting,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(
@@ -378,11 +373,9 @@ def batch_command(
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
-    from app.drivers import check_camera_height, check_roll
 
-    check_camera_height(camera_height)
-    check_roll(roll)
-    keep_left = _keep_left(traffic)
+    mounting = Mounting(None, camera_height, _keep_left(traffic), roll)
+    check_mounting(mounting)
     entries = find_inputs(inputs)
     if not entries:
         raise InputError("no video files found in the inputs; pass videos, folders or a .txt list")
@@ -393,10 +386,8 @@ def batch_command(
         calibration=None if calibration.lower() == "none" else str(Path(calibration).resolve()),
         calibration_required=_named(calibration),
         model=str(model.resolve()) if model is not None else None,
-        camera_height_m=camera_height,
-        keep_left=keep_left,
+        mounting=mounting,
         max_size=_max_size(max_size),
-        roll_deg=roll,
     )
     summary = run_batch(
         entries, options, scheduler, workers, force, log=lambda m: typer.echo(m, err=True)
@@ -436,12 +427,7 @@ def debug_command(
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
     pipeline = Pipeline(
-        cal,
-        *stages,
-        horizon_y=horizon,
-        camera_height_m=camera_height,
-        keep_left=_keep_left(traffic),
-        roll_deg=roll,
+        cal, *stages, mounting=Mounting(horizon, camera_height, _keep_left(traffic), roll)
     )
     written = run_debug(
         source,
@@ -496,7 +482,6 @@ def report_command(
     roll: RollOption = 0.0,
 ) -> None:
     """Write a self-contained HTML report: plots over time and the events with thumbnails."""
-    from app.drivers import check_roll
     from app.events import find_events, signals_from_record
     from app.outputs import check_report_output
     from app.record import read_record

@@ -12,8 +12,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
-from app.drivers import calibration_for, check_camera_height, check_roll, video_horizon
+from app.drivers import calibration_for
 from app.errors import InputError
+from app.mounting import video_mounting
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
 from app.sources import (
@@ -191,9 +192,7 @@ def run_debug(
     if first >= info.n_frames:
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
-    pipeline.horizon_y = video_horizon(pipeline.horizon_y, info)
-    check_camera_height(pipeline.camera_height_m)
-    check_roll(pipeline.roll_deg)
+    pipeline.mounting = video_mounting(pipeline.mounting, info)
     ensure_writable_dir(out_dir)
     start = max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)

@@ -15,19 +15,18 @@ from pathlib import Path
 from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
+from app.mounting import Mounting, check_mounting, video_mounting
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
 from app.runtime import warm_up_opencv
 from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
 from app.sources import (
-    VideoInfo,
     decoding_notes,
     prefetch,
     probe_video,
     read_frames,
     read_image,
-    reduced_row,
     within_size,
 )
 from camera_cal import Calibration, fits, monochrome
@@ -62,51 +61,6 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
     if first >= n_frames:
         raise InputError(f"--start {start_s}s is past the end of the video ({n_frames / fps:.2f}s)")
     return first, last
-
-
-# Camera heights over the road a user may state, in metres (a car's bumper to a lorry's roof).
-CAMERA_HEIGHTS_M = (0.3, 5.0)
-
-
-def check_camera_height(height_m: float | None) -> None:
-    """A user's camera height must be one a vehicle can have."""
-    low, high = CAMERA_HEIGHTS_M
-    if height_m is not None and not low <= height_m <= high:
-        raise InputError(
-            f"--camera-height {height_m:g} m is not a dashcam's height over the road; "
-            f"pass metres from {low:g} to {high:g} (a car's is about 1.2, a lorry's 2-2.5)"
-        )
-
-
-# How far a user may say the picture is turned, in degrees: a dashcam mounted askew, not one
-# on its side (a phone held upright is turned by its rotation tag).
-MAX_ROLL_DEG = 30.0
-
-
-def check_roll(roll_deg: float) -> None:
-    """A user's roll must be a tilt a mounted dashcam can have."""
-    if not abs(roll_deg) <= MAX_ROLL_DEG:
-        raise InputError(
-            f"--roll {roll_deg:g} is not a dashcam's tilt; pass degrees from "
-            f"{-MAX_ROLL_DEG:g} to {MAX_ROLL_DEG:g} (positive: the picture turned anticlockwise, "
-            "its horizon rising to the right)"
-        )
-
-
-def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
-    """A user's horizon row must lie inside the frame."""
-    if horizon_y is not None and not 0 <= horizon_y < size[1]:
-        raise InputError(
-            f"--horizon {horizon_y:g} is outside the frame ({size[1]} rows); "
-            f"pass a row from 0 to {size[1] - 1}"
-        )
-
-
-def video_horizon(horizon_y: float | None, info: VideoInfo) -> float | None:
-    """A user's horizon, a row of the video as stored (checked against its rows), as a row of
-    the frames processed (`within_size` may have reduced them)."""
-    check_horizon(horizon_y, info.reduced_from or info.size)
-    return reduced_row(horizon_y, info)
 
 
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
@@ -161,13 +115,10 @@ def process_video(
     end_s: float | None = None,
     vehicles_in_worker: bool = True,
     events_file: Path | None = None,
-    horizon_y: float | None = None,
     log: Callable[[str], None] = lambda message: None,
     calibration_required: bool = True,
-    camera_height_m: float | None = None,
-    keep_left: bool = False,
     max_size: int = 0,
-    roll_deg: float = 0.0,
+    mounting: Mounting | None = None,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square;
@@ -177,20 +128,16 @@ def process_video(
 
     With `output` None no video is composed or encoded (the record alone). With
     `vehicles_in_worker` the vehicle stage runs in a forked worker process beside the lanes.
-    `horizon_y` fixes the horizon row instead of estimating it from the footage;
-    `camera_height_m` (metres over the road) sizes the vehicle search for a camera that high;
-    `keep_left` is for traffic keeping left (the vehicle stage sees the frames mirrored);
-    `roll_deg` levels a picture turned that many degrees anticlockwise (the output too);
-    a video whose shorter side exceeds `max_size` pixels (0: none) is processed and written at
-    that size (`within_size`; `horizon_y` is a row of the video as stored).
+    The `mounting` the user states (`Mounting`: the horizon row, the camera's height, traffic
+    keeping left, the picture's turn) takes the place of what the footage would tell; a video
+    whose shorter side exceeds `max_size` pixels (0: none) is processed and written at that size
+    (`within_size`; the mounting's horizon is a row of the video as stored).
     """
     warm_up = warm_up_opencv()
     try:
         info = within_size(probe_video(source), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
-        horizon_y = video_horizon(horizon_y, info)
-        check_camera_height(camera_height_m)
-        check_roll(roll_deg)
+        mounting = video_mounting(mounting or Mounting(), info)
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
         calibration = calibration_for(
@@ -203,16 +150,7 @@ def process_video(
     count = 0
     progress = Progress(last - first, label=source.name)
     with (
-        Pipeline(
-            calibration,
-            lanes,
-            vehicles,
-            vehicles_in_worker,
-            horizon_y,
-            camera_height_m,
-            keep_left,
-            roll_deg,
-        ) as pipeline,
+        Pipeline(calibration, lanes, vehicles, vehicles_in_worker, mounting) as pipeline,
         ExitStack() as sinks,
     ):
         pipeline.prepare(info.size, info.fps, first)
@@ -273,10 +211,7 @@ def process_still(
     record: Path | None = None,
     annotators: Sequence[Annotator] = (),
     log: Callable[[str], None] = lambda message: None,
-    horizon_y: float | None = None,
-    camera_height_m: float | None = None,
-    keep_left: bool = False,
-    roll_deg: float = 0.0,
+    mounting: Mounting | None = None,
 ) -> RunSummary:
     """Process one still into an annotated image (and a one-line record).
 
@@ -285,20 +220,11 @@ def process_still(
     """
     image = read_image(source)
     size = (image.shape[1], image.shape[0])
-    check_horizon(horizon_y, size)
-    check_camera_height(camera_height_m)
-    check_roll(roll_deg)
+    mounting = mounting or Mounting()
+    check_mounting(mounting, size)
     started = time.perf_counter()
     calibration = calibration_for(calibration, size, source.name, False, log)
-    with Pipeline(
-        calibration,
-        lanes,
-        vehicles,
-        horizon_y=horizon_y,
-        camera_height_m=camera_height_m,
-        keep_left=keep_left,
-        roll_deg=roll_deg,
-    ) as pipeline:
+    with Pipeline(calibration, lanes, vehicles, mounting=mounting) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)
     with ExitStack() as sinks:

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from app.errors import FrameSizeChanged
 from app.events import Event, EventDetector, FrameSignals
 from app.facts import FactsTracker, FrameFacts, RoadGeometry
+from app.mounting import Mounting
 from app.sources import Frame
 from app.stages import FrameStage
 from app.traffic import KeepLeft
@@ -100,10 +101,9 @@ class Pipeline:
     `prepare(size)` must be called before the first frame of a clip: it builds the undistortion
     maps, resets the stages' history and, with `vehicles_in_worker`, starts the vehicle stage in a
     forked worker process. A frame of another size raises `FrameSizeChanged`. Use it as a context
-    manager, or call `close`, to stop the worker. With `keep_left` (traffic keeping left) the
-    vehicle stage sees every frame mirrored and its boxes come back mirrored (app/traffic.py).
-    With `roll_deg` (a camera mounted turned about its axis: the picture turned that many
-    degrees anticlockwise) the undistorted frames are levelled, and all that follows is too.
+    manager, or call `close`, to stop the worker. The `mounting` the user states (`Mounting`)
+    fixes the horizon, sizes the vehicle windows, mirrors the vehicle stage's frames for traffic
+    keeping left, and levels the undistorted frames of a turned camera.
     """
 
     def __init__(
@@ -112,21 +112,15 @@ class Pipeline:
         lanes: LaneFinder | None = None,
         vehicles: VehicleDetector | None = None,
         vehicles_in_worker: bool = False,
-        horizon_y: float | None = None,
-        camera_height_m: float | None = None,
-        keep_left: bool = False,
-        roll_deg: float = 0.0,
+        mounting: Mounting | None = None,
     ) -> None:
         self.calibration = calibration
-        self.roll_deg = roll_deg  # the picture's turn the user states; levelled with the lens
-        self.horizon_y = horizon_y  # the user's horizon row; None: estimated from the footage
-        # The user's camera height over the road (sizes the vehicle windows); None: a car's.
-        self.camera_height_m = camera_height_m
+        self.mounting = mounting if mounting is not None else Mounting()
         self._car_scale = 1.0  # the vehicle windows' ground scale (see `prepare`)
         self.lanes = lanes
         # Traffic keeping left: the vehicle stage sees the frames mirrored (see app/traffic.py).
         self.vehicles: VehicleDetector | KeepLeft | None = (
-            KeepLeft(vehicles) if keep_left and vehicles is not None else vehicles
+            KeepLeft(vehicles) if self.mounting.keep_left and vehicles is not None else vehicles
         )
         self.vehicles_in_worker = vehicles_in_worker and vehicles is not None
         self.size: tuple[int, int] | None = None
@@ -167,8 +161,8 @@ class Pipeline:
         Raises `camera_cal.CalibrationMismatch` when the calibration does not fit the size.
         """
         self._undistorter = (
-            build_undistorter(self.calibration, size, self.roll_deg)
-            if self.calibration is not None or self.roll_deg
+            build_undistorter(self.calibration, size, self.mounting.roll_deg)
+            if self.calibration is not None or self.mounting.roll_deg
             else None
         )
         self.size = size
@@ -182,15 +176,14 @@ class Pipeline:
         # depends on the camera's height alone, which the road does not tell: the vehicle
         # windows follow only a height the user states (sized by a learned 0.67, they boxed a
         # roadside sign on the rural clip's unmined part, 3 frames of 106).
+        height = self.mounting.camera_height_m
         self._car_scale = (
-            1.0
-            if self.camera_height_m is None
-            else round(self._geometry.camera_height_m / self.camera_height_m, 3)
+            1.0 if height is None else round(self._geometry.camera_height_m / height, 3)
         )
         self._scene = SceneTracker(
             size,
             self._geometry.horizon_y,
-            self.horizon_y,
+            self.mounting.horizon_y,
             fixed_scale=lens,
             min_estimates=horizon_estimates(fps),
             # Lane widths over 10 s, believed after 1 s of them (counts at 25 fps for a still),
@@ -208,7 +201,7 @@ class Pipeline:
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0
         self._vehicle_boxes.clear()
-        unknown = self.calibration is None and self.horizon_y is None
+        unknown = self.calibration is None and self.mounting.horizon_y is None
         self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:

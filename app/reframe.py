@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from app.assembly import build_stages
 from app.drivers import process_video
 from app.evaluate import FrameLabels, evaluate, load_labels_document
+from app.mounting import Mounting
 from app.record import read_record
 from app.sinks import VideoSink
 from app.sources import Frame, probe_video, read_frames
@@ -310,8 +311,7 @@ def framing_scores(
         vehicles,
         record=record,
         vehicles_in_worker=False,
-        keep_left=framing.keep_left,
-        roll_deg=framing.roll,
+        mounting=Mounting(keep_left=framing.keep_left, roll_deg=framing.roll),
     )
     truth = retime_labels(load_labels_document(document), framing, info.n_frames)
     frames = list(read_record(record))

@@ -170,6 +170,7 @@ def test_a_camera_mounted_higher_finds_cars_when_told_its_height(
     Twenty training-set cars pasted so on the raised road (30 and 70 px): the windows sized for
     the tuned camera find none; told the camera's height (--camera-height), the pipeline sizes
     them for it and finds most. The lanes' width alone does not move them (see the pipeline)."""
+    from app.mounting import Mounting
     from app.pipeline import Pipeline
 
     with zipfile.ZipFile(data_dir / "vehicles.zip") as archive:
@@ -193,7 +194,7 @@ def test_a_camera_mounted_higher_finds_cars_when_told_its_height(
             truth = (x0, y1 - size, x0 + size, y1)
             for height in found:
                 detector = VehicleDetector(model, still, verifier=verifier, small=_small())
-                with Pipeline(None, None, detector, horizon_y=horizon, camera_height_m=height) as p:
+                with Pipeline(None, None, detector, mounting=Mounting(horizon, height)) as p:
                     p.prepare((frame.shape[1], frame.shape[0]))
                     result = p.run(frame).result.vehicles
                 assert result is not None

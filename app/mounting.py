@@ -1,0 +1,81 @@
+"""What the user says of how the camera is mounted, and the checks that it is a dashcam's.
+
+Each value takes the place of what the footage or the tuned camera would give; the CLI builds
+one `Mounting` from `--horizon`, `--camera-height`, `--traffic` and `--roll`, and the pipeline
+reads it (app/pipeline.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from app.errors import InputError
+from app.sources import VideoInfo, reduced_row
+
+
+@dataclass(frozen=True)
+class Mounting:
+    """What the user says of how the camera is mounted, each in place of what the footage or
+    the tuned camera would give: the horizon row (None: estimated from the footage), the height
+    over the road in metres (None: a car's; sizes the vehicle windows), traffic keeping left
+    (the vehicle stage sees every frame mirrored and its boxes come back mirrored,
+    app/traffic.py) and the picture's turn in degrees anticlockwise (levelled with the lens)."""
+
+    horizon_y: float | None = None
+    camera_height_m: float | None = None
+    keep_left: bool = False
+    roll_deg: float = 0.0
+
+
+# Camera heights over the road a user may state, in metres (a car's bumper to a lorry's roof).
+CAMERA_HEIGHTS_M = (0.3, 5.0)
+
+
+def check_camera_height(height_m: float | None) -> None:
+    """A user's camera height must be one a vehicle can have."""
+    low, high = CAMERA_HEIGHTS_M
+    if height_m is not None and not low <= height_m <= high:
+        raise InputError(
+            f"--camera-height {height_m:g} m is not a dashcam's height over the road; "
+            f"pass metres from {low:g} to {high:g} (a car's is about 1.2, a lorry's 2-2.5)"
+        )
+
+
+# How far a user may say the picture is turned, in degrees: a dashcam mounted askew, not one
+# on its side (a phone held upright is turned by its rotation tag).
+MAX_ROLL_DEG = 30.0
+
+
+def check_roll(roll_deg: float) -> None:
+    """A user's roll must be a tilt a mounted dashcam can have."""
+    if not abs(roll_deg) <= MAX_ROLL_DEG:
+        raise InputError(
+            f"--roll {roll_deg:g} is not a dashcam's tilt; pass degrees from "
+            f"{-MAX_ROLL_DEG:g} to {MAX_ROLL_DEG:g} (positive: the picture turned anticlockwise, "
+            "its horizon rising to the right)"
+        )
+
+
+def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
+    """A user's horizon row must lie inside the frame."""
+    if horizon_y is not None and not 0 <= horizon_y < size[1]:
+        raise InputError(
+            f"--horizon {horizon_y:g} is outside the frame ({size[1]} rows); "
+            f"pass a row from 0 to {size[1] - 1}"
+        )
+
+
+def check_mounting(mounting: Mounting, size: tuple[int, int] | None = None) -> None:
+    """A user's mounting must be one a dashcam can have, and its horizon a row of frames of
+    `size` (not checked without one)."""
+    if size is not None:
+        check_horizon(mounting.horizon_y, size)
+    check_camera_height(mounting.camera_height_m)
+    check_roll(mounting.roll_deg)
+
+
+def video_mounting(mounting: Mounting, info: VideoInfo) -> Mounting:
+    """A user's mounting checked against a video, its horizon (a row of the video as stored)
+    as a row of the frames processed (`within_size` may have reduced them)."""
+    check_mounting(mounting, info.reduced_from or info.size)
+    return replace(mounting, horizon_y=reduced_row(mounting.horizon_y, info))
