@@ -14,6 +14,7 @@ import pyarrow.compute as pc
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
+from distributed import Client
 
 from tests.helpers import read_record, run_cli
 
@@ -170,7 +171,10 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
                     stderr=logs,
                 )
             )
-        time.sleep(4)
+        # The batch starts once the scheduler has both workers (a fixed wait was too short
+        # once, on a busy machine: the batch found no worker at work within a minute).
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(2, timeout=60)
         out = tmp_path / "out"
         batch = subprocess.Popen(
             _batch(inputs, out, "--scheduler", address, "--no-video"),
@@ -188,7 +192,7 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
                 killed = True
             time.sleep(0.1)
         stdout, stderr = batch.communicate(timeout=300)
-        assert killed
+        assert killed, stdout + stderr
         assert "3 done, 1 failed" in stdout, stdout + stderr
         rows = _manifest(out)
         assert sum(r["status"] == "done" for r in rows.values()) == 3
