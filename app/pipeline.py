@@ -31,9 +31,9 @@ from camera_cal import (
     SceneGeometry,
     SceneTracker,
     Undistorter,
-    build_undistorter,
     calibrated_scale_height,
     horizon_estimates,
+    undistorter_for,
 )
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
@@ -160,11 +160,7 @@ class Pipeline:
 
         Raises `camera_cal.CalibrationMismatch` when the calibration does not fit the size.
         """
-        self._undistorter = (
-            build_undistorter(self.calibration, size, self.mounting.roll_deg)
-            if self.calibration is not None or self.mounting.roll_deg
-            else None
-        )
+        self._undistorter = undistorter_for(self.calibration, size, self.mounting.roll_deg)
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())

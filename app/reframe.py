@@ -27,7 +27,7 @@ from app.mounting import Mounting
 from app.record import read_record
 from app.sinks import VideoSink
 from app.sources import Frame, probe_video, read_frames
-from camera_cal import Calibration, build_undistorter
+from camera_cal import Calibration, undistorter_for
 from vehicles.detections import iou_matrix
 from vehicles.model import VehicleModel
 
@@ -259,7 +259,7 @@ def write_reframed(
     """`video` undistorted with `calibration` (the labels' frame) and re-framed, encoded to
     `output` with the x264 `preset`; its size."""
     info = probe_video(video)
-    undistort = build_undistorter(calibration, info.size) if calibration else None
+    undistort = undistorter_for(calibration, info.size)
     size = framing.output_size(info.size)
     shown = 0  # frames written so far
     # ffmpeg converts the copies' RGB, as it did when the table was first measured: the table

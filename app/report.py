@@ -23,7 +23,7 @@ from app.errors import InputError
 from app.events import LANE_WIDTH_M, Event, EventConfig, event_from_record, nearest_ahead
 from app.record import read_record_lines
 from app.sources import probe_video, read_frames
-from camera_cal import Calibration, build_undistorter, fits
+from camera_cal import Calibration, fits, undistorter_for
 
 PLOT_W, PLOT_H = 860, 170
 MARGIN_L, MARGIN_R, MARGIN_T, MARGIN_B = 58, 12, 26, 26
@@ -333,9 +333,7 @@ def event_thumbnails(
             f"{size[0]}x{size[1]}; pass the video the record was made from"
         )
     lens = calibration if calibration is not None and fits(calibration, info.size) else None
-    undistort = (
-        build_undistorter(lens, info.size, roll_deg) if lens is not None or roll_deg else None
-    )
+    undistort = undistorter_for(lens, info.size, roll_deg)
     by_frame = {int(r["frame"]): r for r in rows}
     thumbnails = {}
     for k, event in enumerate(events):

@@ -24,6 +24,7 @@ from camera_cal.undistort import (
     build_undistorter,
     calibrated_scale_height,
     fits,
+    undistorter_for,
 )
 
 __all__ = [
@@ -45,4 +46,5 @@ __all__ = [
     "load_calibration",
     "monochrome",
     "save_calibration",
+    "undistorter_for",
 ]

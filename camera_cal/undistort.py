@@ -144,6 +144,16 @@ def build_undistorter(
     return Undistorter(size=size, camera_matrix=matrix, map1=map1, map2=map2)
 
 
+def undistorter_for(
+    calibration: Calibration | None, size: tuple[int, int], roll_deg: float = 0.0
+) -> Undistorter | None:
+    """`build_undistorter`'s for frames of `size`, or None when there is neither a lens to undo
+    nor a turn to level: the frames are used as they are."""
+    if calibration is None and not roll_deg:
+        return None
+    return build_undistorter(calibration, size, roll_deg)
+
+
 def level_rotation(roll_deg: float) -> NDArray[np.float64] | None:
     """The rotation about the optical axis that turns a picture turned `roll_deg` degrees
     anticlockwise back to level (x right, y down: a positive angle turns it clockwise on the

@@ -198,10 +198,9 @@ def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: 
     """project_cut_1 as a camera turned 3 degrees anticlockwise about its axis films it (each
     frame turned about the lens's principal point). Untold, the level vehicle bands cross the
     tilted road: fewer of its cars are found, and boxed worse (against the labels turned
-    alike); with
-    `--roll 3` the frames are levelled as they are undistorted, and the cars are found where
-    the labels of the level clip have them (precision >= 0.95, recall as the clip's own), the
-    lane too. A roll no mounted dashcam has is refused in one line, and nothing is written."""
+    alike); with `--roll 3` the frames are levelled as they are undistorted, and the cars are
+    found where the labels of the level clip have them (precision >= 0.95, recall as the
+    clip's own), the lane too. A roll no mounted dashcam has is refused in one line, and nothing is written."""
     from app.evaluate import evaluate, load_labels_document
     from app.sinks import VideoSink
     from app.sources import probe_video, read_frames
