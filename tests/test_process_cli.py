@@ -200,7 +200,8 @@ def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: 
     tilted road: fewer of its cars are found, and boxed worse (against the labels turned
     alike); with `--roll 3` the frames are levelled as they are undistorted, and the cars are
     found where the labels of the level clip have them (precision >= 0.95, recall as the
-    clip's own), the lane too. A roll no mounted dashcam has is refused in one line, and nothing is written."""
+    clip's own), the lane too. A roll no mounted dashcam has is refused in one line, and
+    nothing is written."""
     from app.evaluate import evaluate, load_labels_document
     from app.sinks import VideoSink
     from app.sources import probe_video, read_frames
