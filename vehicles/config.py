@@ -111,7 +111,8 @@ class DetectorConfig:
     dark_frames: int = 3
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
-    # fooled the detector, while the detector's windows still place the boxes.
+    # fooled the detector, while the detector's windows still place the boxes. On a dark road
+    # the dark verifier, when there is one, checks them instead (see `VehicleDetector`).
     min_verified: float = 0.3
     # A window does not heat where burnt-in captions (a timestamp, a watermark) cover at least
     # this share of it: their letters' edges are no car's.
@@ -146,6 +147,12 @@ class DetectorConfig:
     # The frame rate the frame counts of `heat` and `track` are for: at another rate they cover
     # the same time (`at_rate`), so a car is shown, kept and dropped after as many seconds.
     frame_rate: float = 25.0
+
+    def is_dark(self, road_grey: float | None) -> bool:
+        """Whether a road ahead of this grey level (None: unknown, taken as daylight) is at dusk
+        or darker (under `dark_road[2]`): the windows read the mean of the last frames and the
+        dark verifier checks them."""
+        return road_grey is not None and road_grey < self.dark_road[2]
 
     def min_probability_at(self, road_grey: float | None) -> float:
         """The least P(vehicle) of a hit on a road ahead of this grey level (None: unknown,

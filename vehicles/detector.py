@@ -100,6 +100,12 @@ def frame_mean(frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
     return ((total + len(frames) // 2) // len(frames)).astype(np.uint8)
 
 
+def checked_by(scorers: dict[int, Scorer], verifier: VehicleModel) -> dict[int, Scorer]:
+    """`scorers` with each one whose model reads `verifier`'s features checked by it instead."""
+    reads = (patch for patch, scorer in scorers.items() if scorer.model.config == verifier.config)
+    return {**scorers, **{patch: Scorer.of(scorers[patch].model, verifier) for patch in reads}}
+
+
 class VehicleDetector:
     """Finds vehicles in every frame; keeps a Heatmap and a Tracker as history.
 
@@ -115,6 +121,7 @@ class VehicleDetector:
         verifier: VehicleModel | None = None,
         small: Scorer | None = None,
         lowres: VehicleModel | None = None,
+        dark_verifier: VehicleModel | None = None,
     ) -> None:
         self.model = model
         self.config = config if config is not None else DetectorConfig()
@@ -129,6 +136,12 @@ class VehicleDetector:
             if lowres is None
             else {**self.scorers, lowres.config.patch_size: Scorer.of(lowres, verifier)}
         )
+        # On a dark road the models whose features `dark_verifier` reads are checked by it
+        # instead: it also learned a dim sensor's grain (see `make train`).
+        self.dark_scorers, self.dark_lowres_scorers = self.scorers, self.lowres_scorers
+        if dark_verifier is not None:
+            self.dark_scorers = checked_by(self.scorers, dark_verifier)
+            self.dark_lowres_scorers = checked_by(self.lowres_scorers, dark_verifier)
         self.keep_debug = keep_debug
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
         self.heatmap, self.tracker, self.dark_frames = self._fresh_history()
@@ -155,7 +168,7 @@ class VehicleDetector:
         `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
         included; else the frame itself (and the dark frames are forgotten)."""
         store = self.dark_frames
-        if road_grey is None or road_grey >= self.config.dark_road[2]:
+        if not self.config.is_dark(road_grey):
             store.clear()
             return frame
         if store and store[-1].shape != frame.shape:
@@ -185,19 +198,26 @@ class VehicleDetector:
             ground_scale,
         )
 
-    def scorers_for(self, view: View) -> dict[int, Scorer]:
-        """The scorer of each band's patch size for pictures seen as `view`."""
-        return self.lowres_scorers if view.scale_height < self.config.lowres_rows else self.scorers
+    def scorers_for(self, view: View, dark: bool = False) -> dict[int, Scorer]:
+        """The scorer of each band's patch size for pictures seen as `view` (on a `dark` road)."""
+        lowres = view.scale_height < self.config.lowres_rows
+        if dark:
+            return self.dark_lowres_scorers if lowres else self.dark_scorers
+        return self.lowres_scorers if lowres else self.scorers
 
     def search(
-        self, frame: NDArray[np.uint8], parity: int | None = None, view: View | None = None
+        self,
+        frame: NDArray[np.uint8],
+        parity: int | None = None,
+        view: View | None = None,
+        dark: bool = False,
     ) -> tuple[BandHits, ...]:
         """Window scores of the bands searched this frame (all bands when parity is None)."""
         bands = self.config.bands
         if parity is not None:
             bands = bands[parity::2]
         where = view or self.view((frame.shape[1], frame.shape[0]))
-        scorers = self.scorers_for(where)
+        scorers = self.scorers_for(where, dark)
         found = (
             search_band(
                 frame,
@@ -213,7 +233,7 @@ class VehicleDetector:
         return tuple(hit for hit in found if hit is not None)
 
     def window_terms(
-        self, hits: Sequence[BandHits], view: View
+        self, hits: Sequence[BandHits], view: View, dark: bool = False
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """For every window of `hits`, in order: P(vehicle) by its band's model, its verifier's
         P(vehicle) (1 where that model has none), and the weight of its heat. A window steps one
@@ -221,7 +241,7 @@ class VehicleDetector:
         eighth, so fewer of them overlap a small car: each of its hits heats 8 / 4 = 2 times as
         much (the square, 4, spoilt the boxes of 34-40 px cars; tried)."""
         cells = self.model.config.cells_per_patch
-        scorers = self.scorers_for(view)
+        scorers = self.scorers_for(view, dark)
         terms: list[tuple[NDArray[np.float64], ...]] = [(np.zeros(0),) * 3]
         for hit in hits:
             scorer = scorers[hit.band.patch]
@@ -260,9 +280,10 @@ class VehicleDetector:
         smallest = cfg.min_box * view.scale_height * view.ground_scale
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
-        hits = self.search(self.seen(frame, road_grey), parity, view)
+        dark = cfg.is_dark(road_grey)
+        hits = self.search(self.seen(frame, road_grey), parity, view, dark)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        proba, checked, density = self.window_terms(hits, view)
+        proba, checked, density = self.window_terms(hits, view, dark)
         strong = proba >= cfg.min_probability_at(road_grey)
         sure = checked >= cfg.min_verified
         vetoed = boxes[strong & ~sure]
