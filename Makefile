@@ -26,6 +26,8 @@ calibrate: data
 # are there (their first 60 %; the rest measures the result) by the model trained without them.
 WILD := $(SHARED)/wild
 NEGATIVE_CLIPS := $(wildcard $(WILD)/rural_2lane_wet.mp4 $(WILD)/night_highway_istock.mp4)
+# On a dark road the 64 px models are checked by the dark verifier instead, which also learns the
+# false alarms of dimmed, grainy copies of the same clips (`mine --dusk`).
 # The 32 px model reads the smallest windows (cars 3-4 % of the height), with its own verifier;
 # the low-resolution model reads pictures under 540 rows (trained also on compressed copies).
 train: data
@@ -38,6 +40,9 @@ ifneq ($(NEGATIVE_CLIPS),)
 		--hard-negatives output/hard_negatives
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/small_verifier.npz --patch 32 \
 		--hard-negatives output/hard_negatives
+	$(BIN)/roadview mine $(NEGATIVE_CLIPS) --out output/dusk_negatives --every 1 --dusk
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/dark_verifier.npz \
+		--hard-negatives output/hard_negatives --hard-negatives output/dusk_negatives
 else
 	@echo "no wild clips in $(WILD): the verifiers are not retrained"
 endif

@@ -522,7 +522,8 @@ def train_command(
         "vehicles/models/default.npz"
     ),
     hard_negatives: Annotated[
-        Path | None, typer.Option(help="Folder of extra non-vehicle patches mined from frames.")
+        list[Path] | None,
+        typer.Option(help="Folder of extra non-vehicle patches mined from frames (repeatable)."),
     ] = None,
     jobs: Annotated[int, typer.Option(help="Parallel workers.")] = 2,
     c: Annotated[
@@ -559,7 +560,7 @@ def train_command(
     if patch not in (32, 64):
         raise InputError(f"--patch {patch} is not a model size; give 64 or 32")
     patches = load_patches(data)
-    extra = load_patch_folder(hard_negatives) if hard_negatives is not None else []
+    extra = [patch for folder in hard_negatives or [] for patch in load_patch_folder(folder)]
     bar = Progress(len(patches) + len(extra), label="features", unit="patches/s")
 
     def progress(done: int, total: int) -> None:
@@ -603,11 +604,19 @@ def mine_command(
     ] = 0.6,
     every: Annotated[int, typer.Option(help="Mine every n-th frame.")] = 3,
     model: ModelOption = None,
+    dusk: Annotated[
+        bool,
+        typer.Option(
+            "--dusk/--no-dusk",
+            help="Mine dimmed, grainy copies of each clip instead (a dim sensor at dusk and "
+            "night), read as 'process' reads a dark road: for the dark verifier.",
+        ),
+    ] = False,
 ) -> None:
     """Cut the windows the vehicle model is sure of in clips without vehicles into patches, for
     'train --hard-negatives': what fooled it there is learned as road."""
     from app.assembly import build_stages
-    from app.mining import mine_clips
+    from app.mining import DUSK, mine_clips
 
     if not 0 < share <= 1 or every < 1:
         raise InputError("--share must be in (0, 1] and --every at least 1")
@@ -619,7 +628,8 @@ def mine_command(
         lanes=False, model=model, verify=False, small=False, lowres=False
     ).vehicles
     assert detector is not None
-    total = mine_clips(videos, detector, out, share, every, log=typer.echo)
+    dimmings = DUSK if dusk else ()
+    total = mine_clips(videos, detector, out, share, every, log=typer.echo, dimmings=dimmings)
     typer.echo(f"wrote {total} patches to {out}")
 
 

@@ -4,17 +4,65 @@ there is a false alarm, cut out as a patch for `roadview train --hard-negatives`
 from __future__ import annotations
 
 import shutil
+import subprocess
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from app.sources import probe_video, read_frames
+from app.errors import InputError
+from app.sources import ffmpeg_binary, probe_video, read_frames
 from camera_cal import SceneTracker
 from vehicles.detector import VehicleDetector
 from vehicles.mining import surest_apart, window_patches
+
+
+@dataclass(frozen=True)
+class Dimming:
+    """A dim sensor's picture made of footage: ffmpeg's `eq` (`gamma`, `brightness`,
+    `saturation`) and grain of strength `grain` (0-100) drawn anew in every frame from `seed`,
+    at `rows` rows (None: as stored), then encoded as a dashcam would (x264, CRF 23)."""
+
+    gamma: float
+    brightness: float
+    saturation: float
+    grain: int
+    seed: int
+    rows: int | None = None
+
+    def filters(self) -> str:
+        """The ffmpeg filter chain."""
+        scale = f"scale=-2:{self.rows}," if self.rows is not None else ""
+        return (
+            f"{scale}eq=gamma={self.gamma:g}:brightness={self.brightness:g}:"
+            f"saturation={self.saturation:g},noise=alls={self.grain}:allf=t:all_seed={self.seed}"
+        )
+
+
+# The dusk and night copies the dark verifier's hard negatives are mined from: roads of 1-18 grey
+# levels, at 360 rows and upscaled to 720 (other strengths than the README's grainy copies).
+DUSK = (
+    Dimming(0.6, -0.06, 0.7, grain=4, seed=11),
+    Dimming(0.5, -0.1, 0.6, grain=8, seed=13, rows=720),
+    Dimming(0.6, -0.06, 0.7, grain=5, seed=17, rows=720),
+)
+
+
+def dimmed_copy(video: Path, dimming: Dimming, out: Path) -> Path:
+    """`video` as `dimming` makes it, written to `out`."""
+    command = [ffmpeg_binary(), "-y", "-loglevel", "error", "-i", str(video)]
+    done = subprocess.run(
+        [*command, "-vf", dimming.filters(), "-an", "-c:v", "libx264", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise InputError(f"cannot make a dimmed copy of {video} ({last}); check the clip")
+    return out
 
 
 def mine_clip(
@@ -25,17 +73,24 @@ def mine_clip(
     every: int = 3,
     min_probability: float = 0.5,
     per_frame: int = 8,
+    as_seen: bool = False,
+    name: str | None = None,
 ) -> int:
     """Write the surest windows of every `every`-th frame of the first `share` of `video` (a
-    clip without vehicles) to `out` as `<clip>_<frame>_<k>.png`; how many. The windows are
-    placed from the scene as in `roadview process` (no undistortion: footage of an unknown
-    camera). The rest of the clip is left for measuring what the mined patches did."""
+    clip without vehicles) to `out` as `<name>_<frame>_<k>.png` (`name`: the clip's); how many.
+    The windows are placed from the scene as in `roadview process` (no undistortion: footage of
+    an unknown camera) and, `as_seen`, read the picture as `process` reads it (on a dark road
+    the mean of the last frames). The rest of the clip is left for measuring what the mined
+    patches did."""
     info = probe_video(video)
     tracker = SceneTracker(info.size, detector.config.reference_horizon * info.size[1])
+    detector.reset(info.fps)
     end = round(share * info.n_frames)
     written = 0
     for index, frame in enumerate(read_frames(video, info, 0, end)):
-        tracker.update(frame)
+        scene = tracker.update(frame)
+        if as_seen:
+            frame = detector.seen(frame, scene.road_grey)
         if index % every:
             continue
         placed = tracker.placement
@@ -47,8 +102,8 @@ def mine_clip(
         proba = detector.window_terms(hits, view)[0]
         chosen = surest_apart(boxes, proba, min_probability, per_frame)
         for k, patch in enumerate(window_patches(frame, boxes[chosen])):
-            name = out / f"{video.stem}_{index:05d}_{k:02d}.png"
-            cv2.imwrite(str(name), np.ascontiguousarray(patch[:, :, ::-1]))
+            path = out / f"{name or video.stem}_{index:05d}_{k:02d}.png"
+            cv2.imwrite(str(path), np.ascontiguousarray(patch[:, :, ::-1]))
             written += 1
     return written
 
@@ -60,18 +115,27 @@ def mine_clips(
     share: float = 0.6,
     every: int = 3,
     log: Callable[[str], None] = lambda message: None,
+    dimmings: Sequence[Dimming] = (),
 ) -> int:
     """`mine_clip` over `videos` into the folder `out`, which appears only when all are done
-    (written beside it, then renamed; an older `out` is replaced)."""
+    (written beside it, then renamed; an older `out` is replaced). With `dimmings`, each clip's
+    copies so dimmed are mined instead, read as `process` reads them."""
     out.parent.mkdir(parents=True, exist_ok=True)
     total = 0
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.", dir=out.parent) as tmp:
         part = Path(tmp) / "patches"
         part.mkdir()
         for video in videos:
-            count = mine_clip(video, detector, part, share, every)
-            log(f"{video.name}: {count} patches")
-            total += count
+            for k, dimming in enumerate(dimmings):
+                copy = dimmed_copy(video, dimming, Path(tmp) / f"dim{k}.mp4")
+                name = f"{video.stem}_dim{k}"
+                count = mine_clip(copy, detector, part, share, every, as_seen=True, name=name)
+                log(f"{video.name}, dimmed ({dimming.filters()}): {count} patches")
+                total += count
+            if not dimmings:
+                count = mine_clip(video, detector, part, share, every)
+                log(f"{video.name}: {count} patches")
+                total += count
         if out.exists():
             shutil.rmtree(out)
         part.rename(out)
