@@ -34,7 +34,8 @@ def build_stages(
 
     For a still there is no history: every band is searched and nothing waits for confirmation.
     A `classifier` already loaded is used instead of loading `model`. The vehicle stage's windows
-    are also checked by the `verifier` model (the shipped one by default) unless `verify` is off.
+    are also checked by the `verifier` model (the shipped one by default, and on a dark road the
+    shipped dark verifier) unless `verify` is off.
     The smallest windows are read by the shipped 32 px model unless `small` is off. With the
     shipped model (no `model` nor `classifier` given), pictures of few rows are read by the
     shipped low-resolution model (see `DetectorConfig.lowres_rows`) unless `lowres` is off.
@@ -48,6 +49,7 @@ def build_stages(
         from vehicles.config import DetectorConfig
         from vehicles.detector import Scorer, VehicleDetector
         from vehicles.model import (
+            default_dark_verifier_path,
             default_lowres_path,
             default_small_paths,
             default_verifier_path,
@@ -65,7 +67,10 @@ def build_stages(
             else None
         )
         coarse = load_model(default_lowres_path()) if shipped and lowres else None
+        # On a dark road the shipped verifier gives way to its twin that also learned a dim
+        # sensor's grain; a verifier of the user's own checks every road.
+        dark = load_model(default_dark_verifier_path()) if verify and verifier is None else None
         vehicle_stage = VehicleDetector(
-            classifier, config, keep_debug, checker, twin, lowres=coarse
+            classifier, config, keep_debug, checker, twin, lowres=coarse, dark_verifier=dark
         )
     return Stages(lane_stage, vehicle_stage)

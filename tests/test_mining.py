@@ -10,9 +10,17 @@ import cv2
 import numpy as np
 import pytest
 
+from app.mining import DUSK, Dimming, dimmed_copy
+from app.sinks import VideoWriter
+from app.sources import probe_video, read_frames
 from tests.helpers import process_clip, run_cli
 from vehicles.mining import surest_apart, window_patches
-from vehicles.model import default_model_path, default_verifier_path, load_model
+from vehicles.model import (
+    default_dark_verifier_path,
+    default_model_path,
+    default_verifier_path,
+    load_model,
+)
 
 NO_VEHICLES = ("rural_2lane_wet", "night_highway_istock")  # see the wild clips' README
 
@@ -50,6 +58,41 @@ def test_mine_writes_patches_of_a_clip_and_refuses_a_bad_share(
     assert patches and all(p is not None and p.shape == (64, 64, 3) for p in patches)
     bad = run_cli("mine", clip, "--out", tmp_path / "x", "--share", "0")
     assert bad.returncode != 0 and "--share" in bad.stderr and not (tmp_path / "x").exists()
+
+
+def test_a_dimmed_copy_is_darker_and_grainy_anew_in_every_frame(tmp_path: Path) -> None:
+    """A still grey clip, dimmed as the dark verifier's copies are: darker, at the rows asked
+    for, and its grain differs from frame to frame (a dim sensor's, not a pattern)."""
+    clip = tmp_path / "grey.mp4"
+    writer = VideoWriter(clip, (64, 36), 25.0)
+    for _ in range(4):
+        writer.write(np.full((36, 64, 3), 120, np.uint8))
+    writer.close()
+    dimming = Dimming(0.6, -0.06, 0.7, grain=8, seed=3, rows=72)
+    out = dimmed_copy(clip, dimming, tmp_path / "dim.mp4")
+    info = probe_video(out)
+    frames = np.stack(list(read_frames(out, info))).astype(float)
+    assert info.size == (128, 72) and len(frames) == 4
+    assert frames.mean() < 90
+    assert np.abs(np.diff(frames, axis=0)).mean() > 1.0  # the grain moves
+    assert {d.rows for d in DUSK} == {None, 720}  # mined at the clips' size and upscaled
+
+
+def test_mine_dusk_mines_each_dimmed_copy(test_video: Path, tmp_path: Path) -> None:
+    out = tmp_path / "dusk"
+    result = run_cli("mine", test_video, "--out", out, "--share", "0.3", "--every", "4", "--dusk")
+    assert result.returncode == 0, result.stderr
+    names = [p.name for p in out.glob("*.png")]
+    for k in range(len(DUSK)):
+        assert any(name.startswith(f"{test_video.stem}_dim{k}_") for name in names), k
+    assert not list(tmp_path.glob(".dusk.*"))  # the copies went with the temporary folder
+
+
+def test_the_dark_verifier_learned_the_dimmed_copies_too() -> None:
+    verifier, dark = load_model(default_verifier_path()), load_model(default_dark_verifier_path())
+    assert dark.report["n_hard_negatives"] > 2 * verifier.report["n_hard_negatives"]
+    assert dark.config == verifier.config
+    assert dark.report["grouped_split"]["accuracy"] >= 0.985
 
 
 def test_the_shipped_verifier_learned_hard_negatives_and_kept_its_accuracy() -> None:

@@ -38,6 +38,12 @@ def default_verifier_path() -> Path:
     return Path(__file__).with_name("models") / "verifier.npz"
 
 
+def default_dark_verifier_path() -> Path:
+    """The committed verifier of dark roads: it also learned the false alarms of dimmed, grainy
+    copies of clips without vehicles, as a dim sensor films them (see `make train`)."""
+    return Path(__file__).with_name("models") / "dark_verifier.npz"
+
+
 def default_lowres_path() -> Path:
     """The committed model for footage of few rows: trained also on each patch as such footage
     shows it (colour at half resolution, block compression; see `make train`)."""
