@@ -145,8 +145,8 @@ class LaneFinder:
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
         from the scene's `horizon_y`, `live` box, `scale_height`, `vanishing_x` and
-        `ground_scale` when given); the road's motion is read outside the boxes of `vehicles`
-        (n, 4: the latest found).
+        `ground_scale` when given); the road's motion is read around the boxes of `vehicles`
+        (n, 4: the latest found), the `overlays` and the view's part outside the live picture.
         Paint is read through burnt-in `overlays`: a half-transparent caption leaves the paint
         under it visible, and the paint mask's opening along the road drops its letters (hiding
         the captions' boxes lost the night clip's lane in 3 % of its frames)."""
@@ -161,8 +161,9 @@ class LaneFinder:
         )
         bw, bh = view.size
         birdseye = view.warp(frame)
-        hidden = None if vehicles is None else view.covered(vehicles)
-        advance = self.motion.update(birdseye, view.ym_per_px, hidden)
+        advance = self.motion.update(
+            birdseye, view.ym_per_px, self._still(view, vehicles, overlays)
+        )
         mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px)
         paint = Paint.of(mask)
         hints = (cfg.dst_left_x * bw, cfg.dst_right_x * bw)
@@ -186,6 +187,23 @@ class LaneFinder:
             status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
         return LaneResult(lane, debug, status, advance, sample, believed)
+
+    @staticmethod
+    def _still(
+        view: BirdsEye, vehicles: NDArray[np.float64] | None, overlays: Boxes
+    ) -> NDArray[np.bool_]:
+        """The bird's-eye pixels that do not move with the road, which the road's motion is read
+        around: the view outside the live picture (black), burnt-in captions, and `vehicles`
+        (one beside us at our speed stays put). Each pulls the correlation to no motion: a
+        faint asphalt's shift was read a ninth of the truth beside the black corners of a view
+        sheared to an off-centre vanishing point."""
+        still = view.outside
+        for boxes in (vehicles, overlays):
+            if boxes is not None and len(boxes):
+                covered = view.covered(np.asarray(boxes, np.float64).reshape(-1, 4))
+                if covered is not None:
+                    still = still | covered
+        return still
 
     def _width_sample(
         self, fits: list[Fit | None], mask: NDArray[np.uint8], view: BirdsEye

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -36,6 +37,23 @@ class BirdsEye:
     def pixels_for(self, area_m2: float) -> int:
         """How many bird's-eye pixels cover `area_m2` of road (at least 1)."""
         return max(1, round(area_m2 / (self.xm_per_px * self.ym_per_px)))
+
+    @functools.cached_property
+    def outside(self) -> NDArray[np.bool_]:
+        """The bird's-eye pixels whose road point lies outside the live picture: black in every
+        view (where the trapezoid reaches past the picture's side, as it does when sheared to an
+        off-centre vanishing point), a still edge for whatever reads the view's motion."""
+        bw, bh = self.size
+        ys, xs = np.mgrid[0:bh, 0:bw]
+        points = self.to_frame(np.column_stack([xs.ravel(), ys.ravel()]) + 0.5)
+        lx0, ly0, lx1, ly1 = self.live
+        inside = (
+            (points[:, 0] >= lx0)
+            & (points[:, 0] <= lx1)
+            & (points[:, 1] >= ly0)
+            & (points[:, 1] <= ly1)
+        )
+        return np.asarray(~inside.reshape(bh, bw))
 
     def covered(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_] | None:
         """The bird's-eye pixels under any of the frame's `boxes` (n, 4: x0, y0, x1, y1), their

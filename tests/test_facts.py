@@ -15,7 +15,7 @@ from camera_cal import build_undistorter, default_calibration_path, load_calibra
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder
 from lanes.motion import RoadMotion
-from lanes.perspective import BirdsEye
+from lanes.perspective import BirdsEye, birdseye_for
 from lanes.threshold import lane_mask
 from tests.helpers import process_clip
 from vehicles.detections import Detections
@@ -106,6 +106,37 @@ def test_road_motion_reads_the_road_around_a_vehicle_at_our_speed() -> None:
         fooled, advance = plain.update(rgb, 0.125), around.update(rgb, 0.125, hidden)
     assert fooled is not None and fooled < 0.5 * step * 0.125
     assert advance is not None and abs(advance - step * 0.125) < 0.02
+
+
+def test_road_motion_is_read_inside_the_live_picture() -> None:
+    """A view sheared to an off-centre vanishing point (the Indian clip's camera looks 14 % to
+    the right of its road) reaches past the picture's side: its black corners stay put while
+    faint asphalt streams past, and pulled the correlation to a ninth of the truth. The lane
+    stage reads the road's motion around them (`BirdsEye.outside`)."""
+    size, horizon, vanishing_x = (640, 360), 110.0, 230.0
+    view = birdseye_for(size, LaneConfig(), horizon, None, None, vanishing_x)
+    white = view.warp(np.full((size[1], size[0], 3), 255, np.uint8))[..., 0]
+    assert view.outside.any() and np.mean(view.outside == (white == 0)) > 0.98
+    # Each frame pixel below the horizon shows the road point the view maps it to, on a faint
+    # texture that slides `step` bird's-eye rows a frame towards the camera.
+    ys, xs = np.mgrid[0 : size[1], 0 : size[0]].astype(np.float32)
+    road = view.to_birdseye(np.column_stack([xs.ravel(), ys.ravel()])).reshape(*xs.shape, 2)
+    below = ys > horizon + 3
+    rng = np.random.default_rng(0)
+    asphalt = cv2.GaussianBlur((rng.random((3000, 3000)) * 255).astype(np.uint8), (5, 5), 0)
+    asphalt = (asphalt // 8 + 100).astype(np.uint8)  # grey levels 100-131, as a road's
+    step, finder, plain = 3, LaneFinder(), RoadMotion()
+    for k in range(8):
+        map_x = np.where(below, road[..., 0] + 1500, 0).astype(np.float32)
+        map_y = np.where(below, road[..., 1] + 1500 - k * step, 0).astype(np.float32)
+        grey = cv2.remap(asphalt, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+        grey[~below] = 200
+        frame = np.dstack([grey] * 3)
+        advance = finder.process(frame, horizon, None, None, vanishing_x).advance_m
+        fooled = plain.update(view.warp(frame), view.ym_per_px)
+    truth = step * view.ym_per_px
+    assert fooled is not None and fooled < 0.3 * truth
+    assert advance is not None and abs(advance / truth - 1) < 0.15, (advance, truth)
 
 
 def test_road_motion_reads_no_speed_off_a_road_without_texture() -> None:
