@@ -82,6 +82,11 @@ class LaneConfig:
     # dashed line paints 25-40 %).
     sample_parallel: float = 0.35
     middle_line_rows: float = 0.2
+    # A line inside the lane drawn (one of its sides made up at the standard width, or its lines
+    # further apart than this) bounds ours where the camera is this far or further from it; on
+    # the line the car is astride, and the carriageway between the outer lines is where it is.
+    one_lane_max_m: float = 4.6
+    astride_m: float = 0.9
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24
 

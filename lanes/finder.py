@@ -181,6 +181,9 @@ class LaneFinder:
             fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
         sample = self._width_sample(fits, paint.mask, view)
         status = self._check_and_update(fits, pixels, view)
+        inside = self._line_inside(paint, view)
+        if inside is not None:
+            status = (*status, inside)
         believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
         lane, doubt = self._estimate(view)
         if doubt is not None:
@@ -228,6 +231,41 @@ class LaneFinder:
                 return None  # a line well off the middle: which part is a lane is unclear
             sample /= 2
         return sample * view.ground_scale
+
+    def _line_inside(self, paint: Paint, view: BirdsEye) -> str | None:
+        """Where a lane line runs inside the lane the lines' history gives (a side made up at
+        the standard width, or lines more than `one_lane_max_m` apart) and the camera is at
+        least `astride_m` from it, that line bounds our lane: it takes the place of the line
+        beyond it in that side's history (a thin dashed line has too little paint for a side
+        of its own, and the side was made up across it). A note of it, or None."""
+        cfg = self.config
+        bw, bh = view.size
+        left, right = self.left.smoothed, self.right.smoothed
+        if left is None and right is None:
+            return None
+        lane_px = (cfg.dst_right_x - cfg.dst_left_x) * bw
+        made_up = left is None or right is None
+        left = right - np.array([0.0, 0.0, lane_px]) if left is None else left
+        right = left + np.array([0.0, 0.0, lane_px]) if right is None else right
+        width_m = float(lane_widths(left, right, np.array([float(bh)]))[0] * view.xm_per_px)
+        if not made_up and width_m <= cfg.one_lane_max_m:
+            return None
+        half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
+        share, coverage = paint_between(paint.mask, left, right, MIDDLE_SHARES, half_width)
+        if coverage < cfg.middle_line_rows:
+            return None
+        curve = left + share * (right - left)
+        apart_m = (view.camera_x - float(evaluate_fit(curve, bh))) * view.xm_per_px
+        if abs(apart_m) < cfg.astride_m:
+            return None
+        fit = fit_line(prior_search(paint, curve, max(1, int(cfg.prior_margin_m / view.xm_per_px))))
+        if fit is None:
+            return None
+        side = "right" if apart_m < 0 else "left"  # the camera left of the line: our right side
+        beyond = self.right if apart_m < 0 else self.left
+        beyond.reset()
+        beyond.accept(fit)
+        return f"{side}: the line inside the lane, {share:.2f} of its {width_m:.1f} m"
 
     def _prior(self, rows: int) -> LanePrior | None:
         """Heading and near width of the smoothed lane, if both lines have history."""
@@ -358,9 +396,7 @@ class LaneFinder:
         # Past straight_radius_m a radius cannot be told from a straight road: infinite.
         radius = 1.0 / curvature if curvature * cfg.straight_radius_m > 1.0 else math.inf
         # The camera sits at the middle of the live picture; the warp's bottom row is nearest.
-        bottom = float(view.to_frame(np.array([[bw / 2, float(bh)]]))[0, 1])
-        centre_px = float(view.to_birdseye(np.array([[middle, bottom]]))[0, 0])
-        offset = lane_offset(left, right, bh, centre_px, view.xm_per_px)
+        offset = lane_offset(left, right, bh, view.camera_x, view.xm_per_px)
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
         if abs(offset) > cfg.max_offset_share * width:
             self.left.reset()

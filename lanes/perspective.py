@@ -55,6 +55,15 @@ class BirdsEye:
         )
         return np.asarray(~inside.reshape(bh, bw))
 
+    @functools.cached_property
+    def camera_x(self) -> float:
+        """The bird's-eye column of the camera: the middle of the live picture, at the view's
+        bottom row (the nearest road)."""
+        bw, bh = self.size
+        lx0, _, lx1, _ = self.live
+        bottom = float(self.to_frame(np.array([[bw / 2, float(bh)]]))[0, 1])
+        return float(self.to_birdseye(np.array([[(lx0 + lx1) / 2, bottom]]))[0, 0])
+
     def covered(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_] | None:
         """The bird's-eye pixels under any of the frame's `boxes` (n, 4: x0, y0, x1, y1), their
         parts below the horizon (above it the ground plane has no points); None without."""

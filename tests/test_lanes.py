@@ -193,8 +193,11 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # width left of the centre. With the warp upright on it a lane is found in 84 % of the frames
     # (65 % with the warp centred, where the lines ran slanted out of the search windows): 90 %
     # of those before the junction the car crosses at walking pace (from 34.5 s), checked by
-    # eye. Over the junction's zebra crossing (34.6-37.7 s) there is no lane of ours, and none
-    # is drawn in 85 % of the frames (13 % before lanes running 8 degrees off were doubted).
+    # eye; 84 % since a lane with the dashed divider inside it, away from the camera, is no
+    # longer drawn (two lanes, or one side made up across the divider; checked by eye at
+    # frames 8, 790, 820 and 850, where the car's own lane reads under 2.6 m and none is
+    # drawn). Over the junction's zebra crossing (34.6-37.7 s) there is no lane of ours, and
+    # none is drawn in 85 % of the frames (13 % before lanes running 8 degrees off were doubted).
     # Past the crossing (41 s on) the car runs beside the median's fence: lanes were drawn on
     # the fence and the kerb, 2.1-2.4 m left of the camera (checked by eye), in 80 % of the
     # frames; the camera outside a lane makes it none of ours, and none is drawn in 95 %.
@@ -202,7 +205,7 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
         wild_dir / "india_highway_wildfilms.mp4", tmp_path, "--no-vehicles", "--calibration", "none"
     )
     road = [r for r in rows if r["time_s"] < 34.5]
-    assert sum(r["lane"] is not None for r in road) >= 0.85 * len(road)
+    assert sum(r["lane"] is not None for r in road) >= 0.8 * len(road)
     zebra = [r for r in rows if 34.6 <= r["time_s"] < 37.7]
     assert sum(r["lane"] is None for r in zebra) >= 0.75 * len(zebra)
     fence = [r for r in rows if r["time_s"] >= 41.0]
@@ -210,6 +213,40 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # Its watermark is in the record from its sixth second on, in the lower half.
     assert all(r["overlays"] for r in rows if r["time_s"] >= 6.0)
     assert all(y0 > rows[0]["size"][1] / 2 for r in rows for _, y0, _, _ in r["overlays"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("clip", ["night_highway_istock", "rural_2lane_wet"])
+def test_no_lane_is_drawn_across_a_line_the_camera_is_off(wild_dir: Path, clip: str) -> None:
+    """A lane line inside the lane drawn, the camera 0.9 m or more from it: that lane is two
+    lanes, or one whose side was made up across the line (a thin dashed line has too little
+    paint for a side of its own). The night clip drew 66 such frames (a side made up past the
+    white edge line; both lanes of its two-lane road), the rural road 30 (its first second,
+    before its ground scale was learned). The line inside now bounds ours."""
+    from app.pipeline import Pipeline
+    from app.sources import probe_video, read_frames
+    from lanes.finder import MIDDLE_SHARES
+
+    video = wild_dir / f"{clip}.mp4"
+    info = probe_video(video)
+    finder = LaneFinder(keep_debug=True)
+    across = []
+    with Pipeline(None, finder, None) as pipeline:
+        pipeline.prepare(info.size, info.fps)
+        for k, out in enumerate(pipeline.stream(read_frames(video, info))):
+            found, view = out.result.lane, finder.current_view
+            if found is None or found.lane is None or found.debug is None or view is None:
+                continue
+            lane, config = found.lane, finder.config
+            half_width = max(1, round(config.line_width_m / view.xm_per_px))
+            share, coverage = paint_between(
+                found.debug.mask, lane.left_fit, lane.right_fit, MIDDLE_SHARES, half_width
+            )
+            inside = lane.left_fit + share * (lane.right_fit - lane.left_fit)
+            apart_m = (view.camera_x - np.polyval(inside, view.size[1])) * view.xm_per_px
+            if coverage >= config.middle_line_rows and abs(apart_m) >= config.astride_m:
+                across.append(k)
+    assert len(across) <= 2, across
 
 
 def test_a_larger_frame_keeps_the_720_row_birdseye_view() -> None:
