@@ -259,7 +259,8 @@ class SceneTracker:
 
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
     `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
-    then, and every `every` frames after (it changes slowly; each costs a few milliseconds).
+    then (at full size where the picture shrunk to `MEASURE_WIDTH` gives no point), and every
+    `every` frames after (it changes slowly; each costs a few milliseconds).
     The stages' placement follows the horizon and live box in steps of `settle` of the height,
     and the vanishing point's column in steps of `settle_x` of the live width (a bend ahead
     moves it by a few per cent; a camera turned sideways by more).
@@ -382,7 +383,13 @@ class SceneTracker:
         # Those in the live box (the bonnet's edge below it is no caption, and no road is there).
         overlays = tuple(b for b in self._captions if b[1] < live[3] and b[3] > live[1])
         if self.fixed_horizon is None and due and small is not None:
-            self._measure(small, live, overlays)
+            before = len(self._estimates)
+            self._measure(small, self._scale, live, overlays)
+            # While the first horizon waits, a frame the shrunk picture gives no point for is
+            # measured at full size: a camera pitched up sees only the road's far part, whose
+            # dashes shrink below the segments' length (the first horizon took 21 frames).
+            if before < self.min_estimates and len(self._estimates) == before and self._scale < 1:
+                self._measure(grey, 1.0, live, overlays)
         if self._count % self.light_every == 0:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
         self._count += 1
@@ -457,10 +464,11 @@ class SceneTracker:
             cv2.resize(grey, None, fx=self._scale, fy=self._scale, interpolation=cv2.INTER_AREA)
         )
 
-    def _measure(self, small: NDArray[np.uint8], live: Box, overlays: tuple[Box, ...]) -> None:
+    def _measure(
+        self, small: NDArray[np.uint8], scale: float, live: Box, overlays: tuple[Box, ...]
+    ) -> None:
         """Add this frame's vanishing point, when the road's edges outside the `overlays` give
-        one (`small`: the picture shrunk by `_shrink`)."""
-        scale = self._scale
+        one (`small`: the picture shrunk by `scale`)."""
         x0, y0, x1, y1 = (round(v * scale) for v in live)
         hidden = tuple(scale_box(box, scale) for box in overlays)
         h = y1 - y0

@@ -359,3 +359,31 @@ def test_the_scene_says_how_light_the_road_is_at_dusk(data_dir: Path) -> None:
         greys.append(scene.road_grey)
     # Daylight asphalt reads 70-80 there; 0.4 of the light, 0.4 of the grey.
     assert 65 <= greys[0] <= 85 and greys[1] == pytest.approx(0.4 * greys[0], abs=2)
+
+
+@pytest.mark.slow
+def test_a_camera_pitched_up_gets_its_horizon_soon(data_dir: Path, tmp_path: Path) -> None:
+    """test_video as a camera pitched up by a fifth of the height sees it (padded at the top and
+    cut at the bottom): only the road's far part is left, whose dashes, shrunk to the measuring
+    width, are too short for segments, and the first horizon took 21 frames. A frame whose
+    shrunk picture gives no vanishing point while the first horizon waits is measured at full
+    size: it stands within half a second, 144 rows below the clip's own."""
+    from app.reframe import Framing, write_reframed
+    from camera_cal import default_calibration_path, load_calibration
+
+    video = data_dir / "videos" / "test_video.mp4"
+    calibration = load_calibration(default_calibration_path())  # undistorted, as the table
+    w, h = probe_video(video).size
+    cut = h // 5
+    firsts = []
+    for name, framing in (
+        ("as is", Framing("as is")),
+        ("pitched", Framing("pitched", crop=(0, 0, w, h - cut), pad=(0, cut, 0, 0))),
+    ):
+        copy = tmp_path / f"{name}.mp4"
+        write_reframed(video, framing, copy, calibration)
+        rows = process_clip(copy, tmp_path, "--calibration", "none", "--no-vehicles")
+        firsts.append(next(r for r in rows if r["vanishing_x"] is not None))
+    plain, pitched = firsts
+    assert pitched["frame"] <= 12, pitched["frame"]
+    assert abs(pitched["horizon_y"] - (plain["horizon_y"] + cut)) < 0.015 * h, (plain, pitched)
