@@ -176,12 +176,15 @@ class Pipeline:
         self._car_scale = (
             1.0 if height is None else round(self._geometry.camera_height_m / height, 3)
         )
+        # An unknown camera: the stages wait for the footage's horizon (see `_wait`).
+        unknown = self.calibration is None and self.mounting.horizon_y is None
         self._scene = SceneTracker(
             size,
             self._geometry.horizon_y,
             self.mounting.horizon_y,
             fixed_scale=lens,
             min_estimates=horizon_estimates(fps),
+            full_size_first=unknown,
             # Lane widths over 10 s, believed after 1 s of them (counts at 25 fps for a still),
             # moved when they are ones the lane finder does not believe.
             ground=GroundScale(
@@ -197,7 +200,6 @@ class Pipeline:
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0
         self._vehicle_boxes.clear()
-        unknown = self.calibration is None and self.mounting.horizon_y is None
         self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:

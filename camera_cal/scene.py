@@ -259,8 +259,10 @@ class SceneTracker:
 
     `default_horizon` is used until `min_estimates` frames gave a vanishing point, and always when
     `fixed_horizon` is set (the user's `--horizon`). The horizon is measured on every frame until
-    then (at full size where the picture shrunk to `MEASURE_WIDTH` gives no point), and every
-    `every` frames after (it changes slowly; each costs a few milliseconds).
+    then, and every `every` frames after (it changes slowly; each costs a few milliseconds).
+    With `full_size_first` (the app sets it for an unknown camera, whose stages wait for the
+    first horizon), a frame the picture shrunk to `MEASURE_WIDTH` gives no point for is measured
+    again at full size until then.
     The stages' placement follows the horizon and live box in steps of `settle` of the height,
     and the vanishing point's column in steps of `settle_x` of the live width (a bend ahead
     moves it by a few per cent; a camera turned sideways by more).
@@ -287,11 +289,13 @@ class SceneTracker:
         ground: GroundScale | None = None,
         light_every: int = 5,
         light_window: int = 15,
+        full_size_first: bool = False,
     ) -> None:
         self.size = size
         self.ground = ground if ground is not None else GroundScale()
         self.fixed_scale = fixed_scale
         self.default_horizon = default_horizon
+        self.full_size_first = full_size_first
         self.fixed_horizon = fixed_horizon
         self.min_estimates = min_estimates
         self.every = every
@@ -388,7 +392,8 @@ class SceneTracker:
             # While the first horizon waits, a frame the shrunk picture gives no point for is
             # measured at full size: a camera pitched up sees only the road's far part, whose
             # dashes shrink below the segments' length (the first horizon took 21 frames).
-            if before < self.min_estimates and len(self._estimates) == before and self._scale < 1:
+            waiting = self.full_size_first and before < self.min_estimates
+            if waiting and len(self._estimates) == before and self._scale < 1:
                 self._measure(grey, 1.0, live, overlays)
         if self._count % self.light_every == 0:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
