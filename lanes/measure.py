@@ -43,12 +43,13 @@ def implausible_lane(
     max_heading_deg: float = 90.0,
 ) -> str | None:
     """Why a pair of boundaries is not a lane a road can have, or None when it is: its width in
-    metres outside `width_m` at any of `rows`, the two not near parallel (widths differing by
+    metres under `width_m` at any of `rows` but the first (the farthest, whose width a horizon a
+    few rows off narrows most) or over it at any, the two not near parallel (widths differing by
     more than `max_width_change_m`), either bending tighter than `min_radius_m`, or the lane
     running off more than `max_heading_deg` from straight ahead at the last of `rows` (the
     car's): a car drives along its lane, and lines it crosses at a junction are no lane of its."""
     widths = lane_widths(left, right, rows) * xm_per_px
-    if widths.min() < width_m[0] or widths.max() > width_m[1]:
+    if widths[1:].min() < width_m[0] or widths.max() > width_m[1]:
         return f"width {widths.min():.2f}-{widths.max():.2f} m"
     if np.ptp(widths) > max_width_change_m:
         return f"not parallel ({widths.min():.2f}-{widths.max():.2f} m wide)"

@@ -142,6 +142,8 @@ def test_labelled_clips_lane_accuracy(data_dir: Path, tmp_path: Path, clip: str)
         (-5.0, 0.0, None, "width"),  # the lines crossed
         (650.0, 0.0, None, "width"),  # 6.5 m: two lanes
         (300.0, 0.5, None, "not parallel"),  # 3.0 m far, 5.0 m near
+        (240.0, 0.15, None, None),  # 2.4 m far, 3.0 m near: a horizon a few rows off narrows it
+        (240.0, 0.0, None, "width"),  # 2.4 m near too
         (370.0, 0.0, 30.0, "bends"),  # both lines on a 30 m radius
     ],
 )
@@ -193,7 +195,7 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # width left of the centre. With the warp upright on it a lane is found in 84 % of the frames
     # (65 % with the warp centred, where the lines ran slanted out of the search windows): 90 %
     # of those before the junction the car crosses at walking pace (from 34.5 s), checked by
-    # eye; 84 % since a lane with the dashed divider inside it, away from the camera, is no
+    # eye; 83 % since a lane with the dashed divider inside it, away from the camera, is no
     # longer drawn (two lanes, or one side made up across the divider; checked by eye at
     # frames 8, 790, 820 and 850, where the car's own lane reads under 2.6 m and none is
     # drawn). Over the junction's zebra crossing (34.6-37.7 s) there is no lane of ours, and
@@ -216,13 +218,20 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("clip", ["night_highway_istock", "rural_2lane_wet"])
-def test_no_lane_is_drawn_across_a_line_the_camera_is_off(wild_dir: Path, clip: str) -> None:
+@pytest.mark.parametrize(
+    ("clip", "share"), [("night_highway_istock", 0.95), ("rural_2lane_wet", 0.85)]
+)
+def test_no_lane_is_drawn_across_a_line_the_camera_is_off(
+    wild_dir: Path, clip: str, share: float
+) -> None:
     """A lane line inside the lane drawn, the camera 0.9 m or more from it: that lane is two
     lanes, or one whose side was made up across the line (a thin dashed line has too little
     paint for a side of its own). The night clip drew 66 such frames (a side made up past the
     white edge line; both lanes of its two-lane road), the rural road 30 (its first second,
-    before its ground scale was learned). The line inside now bounds ours."""
+    before its ground scale was learned). The line inside now bounds ours, and the lane it
+    bounds is drawn: the night road's reads 2.3-2.5 m at the far row of the view and 3.0 m
+    near, believed since the floor is the near rows' (87 % of the frames had a lane with the
+    floor at every row; the rural road's first second has none until its scale is learned)."""
     from app.pipeline import Pipeline
     from app.sources import probe_video, read_frames
     from lanes.finder import MIDDLE_SHARES
@@ -230,13 +239,14 @@ def test_no_lane_is_drawn_across_a_line_the_camera_is_off(wild_dir: Path, clip: 
     video = wild_dir / f"{clip}.mp4"
     info = probe_video(video)
     finder = LaneFinder(keep_debug=True)
-    across = []
+    across, drawn = [], 0
     with Pipeline(None, finder, None) as pipeline:
         pipeline.prepare(info.size, info.fps)
         for k, out in enumerate(pipeline.stream(read_frames(video, info))):
             found, view = out.result.lane, finder.current_view
             if found is None or found.lane is None or found.debug is None or view is None:
                 continue
+            drawn += 1
             lane, config = found.lane, finder.config
             half_width = max(1, round(config.line_width_m / view.xm_per_px))
             share, coverage = paint_between(
@@ -247,6 +257,7 @@ def test_no_lane_is_drawn_across_a_line_the_camera_is_off(wild_dir: Path, clip: 
             if coverage >= config.middle_line_rows and abs(apart_m) >= config.astride_m:
                 across.append(k)
     assert len(across) <= 2, across
+    assert drawn >= share * info.n_frames, drawn
 
 
 def test_a_larger_frame_keeps_the_720_row_birdseye_view() -> None:
