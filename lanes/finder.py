@@ -239,14 +239,11 @@ class LaneFinder:
         beyond it in that side's history (a thin dashed line has too little paint for a side
         of its own, and the side was made up across it). A note of it, or None."""
         cfg = self.config
-        bw, bh = view.size
-        left, right = self.left.smoothed, self.right.smoothed
-        if left is None and right is None:
+        bh = view.size[1]
+        lines = self._history_lane(view)
+        if lines is None:
             return None
-        lane_px = (cfg.dst_right_x - cfg.dst_left_x) * bw
-        made_up = left is None or right is None
-        left = right - np.array([0.0, 0.0, lane_px]) if left is None else left
-        right = left + np.array([0.0, 0.0, lane_px]) if right is None else right
+        left, right, made_up = lines
         width_m = float(lane_widths(left, right, np.array([float(bh)]))[0] * view.xm_per_px)
         if not made_up and width_m <= cfg.one_lane_max_m:
             return None
@@ -346,6 +343,22 @@ class LaneFinder:
                 line.reject()
         return tuple(notes)
 
+    def _history_lane(self, view: BirdsEye) -> tuple[Fit, Fit, bool] | None:
+        """Both lines' smoothed fits, a side without history following the other at the
+        standard lane width, and whether one did; None when neither has history."""
+        cfg = self.config
+        left, right = self.left.smoothed, self.right.smoothed
+        if left is None and right is None:
+            return None
+        lane_px = (cfg.dst_right_x - cfg.dst_left_x) * view.size[0]
+        made_up = left is None or right is None
+        if left is None:
+            assert right is not None
+            left = right - np.array([0.0, 0.0, lane_px])
+        if right is None:
+            right = left + np.array([0.0, 0.0, lane_px])
+        return left, right, made_up
+
     def _estimate(self, view: BirdsEye) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
         (too narrow or wide, not parallel, too sharp a bend) or not ours (the camera outside it:
@@ -353,16 +366,10 @@ class LaneFinder:
         rather than a wrong one."""
         cfg = self.config
         bw, bh = view.size
-        left, right = self.left.smoothed, self.right.smoothed
-        lane_px = (cfg.dst_right_x - cfg.dst_left_x) * bw
-        if left is None and right is None:
+        lines = self._history_lane(view)
+        if lines is None:
             return None, None
-        # A side without history follows the other at the standard lane width.
-        if left is None:
-            assert right is not None
-            left = right - np.array([0.0, 0.0, lane_px])
-        if right is None:
-            right = left + np.array([0.0, 0.0, lane_px])
+        left, right, _ = lines
         doubt = implausible_lane(
             left,
             right,
