@@ -295,11 +295,15 @@ class EventDetector:
         found = (self._excursion.active, self._following.active, self._closing.active)
         return tuple(e for e in found if e is not None)
 
-    def finish(self) -> list[Event]:
-        """End the footage: close what is under way; every event, by start time."""
+    def close(self) -> None:
+        """End what is under way (the footage cut to another shot); the events found stay."""
         for ended in (self._excursion.finish(), self._following.finish(), self._closing.finish()):
             if ended is not None:
                 self.events.append(ended)
+
+    def finish(self) -> list[Event]:
+        """End the footage: close what is under way; every event, by start time."""
+        self.close()
         return sorted(self.events, key=lambda e: (e.start_s, e.kind))
 
 

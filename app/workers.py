@@ -14,6 +14,7 @@ import multiprocessing
 import pickle
 import signal
 import time
+from collections import deque
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -91,10 +92,14 @@ class StageWorker:
         child.close()
         self._pending = 0
         self._submitted = 0
+        self._reset_next: tuple[float | None] | None = None  # see `reset_before_next`
+        # Per frame in flight, whether a reset was sent just before it (its answer comes first).
+        self._after_reset: deque[bool] = deque()
 
     def submit(self, frame: NDArray[np.uint8], **context: Any) -> None:
         """Hand over one frame (and keyword arguments for the stage's `process`, such as the
-        scene's horizon); the child starts on it as soon as it is free."""
+        scene's horizon); the child starts on it as soon as it is free (after forgetting the
+        stage's history first, if `reset_before_next` asked for it)."""
         if self._pending >= len(self._slots):
             raise WorkerError(f"more than {len(self._slots)} frames in flight")
         if frame.nbytes > self.frame_bytes:
@@ -104,6 +109,10 @@ class StageWorker:
         # interrupt here must not keep the slot from closing).
         self._slots[slot].seek(0)
         self._slots[slot].write(np.ascontiguousarray(frame).data.cast("B"))
+        reset, self._reset_next = self._reset_next, None
+        if reset is not None:  # in turn: the frames in flight keep the history they had
+            self._conn.send(("reset", reset[0]))
+        self._after_reset.append(reset is not None)
         self._conn.send(("frame", (slot, frame.shape, context)))
         self._pending += 1
         self._submitted += 1
@@ -113,13 +122,21 @@ class StageWorker:
         if self._pending == 0:
             raise WorkerError("collect() without a submitted frame")
         self._pending -= 1
+        if self._after_reset.popleft():
+            self._answer()  # the reset's
         result: tuple[object, float] = self._answer()
         return result
+
+    def reset_before_next(self, fps: float | None = None) -> None:
+        """Forget the stage's history, now for frames at `fps`, before the next frame submitted
+        (the frames in flight are done with the history they had; nothing waits)."""
+        self._reset_next = (fps,)
 
     def reset(self, fps: float | None = None) -> None:
         """Forget the stage's history, now for frames at `fps` (waits for frames in flight)."""
         while self._pending:
             self.collect()
+        self._reset_next = None
         self._conn.send(("reset", fps))
         self._answer()
 

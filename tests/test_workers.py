@@ -76,6 +76,25 @@ def test_worker_matches_in_process_order_and_history() -> None:
     assert _through_worker(Counter("b"), frames) == expected  # reset() restarts the history
 
 
+def test_a_reset_before_the_next_frame_leaves_the_frames_in_flight_alone() -> None:
+    """A cut in the footage: the frame in flight keeps its history, the next starts afresh,
+    and nothing waits for the child."""
+    frames = _frames(5)
+    worker = StageWorker(Counter("c"), frame_bytes=frames[0].nbytes)
+    try:
+        worker.submit(frames[0])
+        worker.submit(frames[1])  # two in flight
+        first = worker.collect()[0]
+        worker.reset_before_next(25.0)
+        worker.submit(frames[2])  # after the reset
+        seen = [first, worker.collect()[0], worker.collect()[0]]
+        worker.submit(frames[3])
+        seen.append(worker.collect()[0])
+    finally:
+        worker.close()
+    assert [s.count for s in seen] == [1, 2, 1, 2]  # type: ignore[attr-defined]
+
+
 def test_pipeline_with_the_vehicle_worker_equals_in_process(test_video: Path) -> None:
     from app.assembly import build_stages
     from app.pipeline import Pipeline
