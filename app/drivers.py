@@ -186,6 +186,12 @@ def process_video(
                 f"{source} is truncated or damaged: decoded {count} of {expected} frames; "
                 "re-export or re-download the video"
             )
+        if pipeline.cuts:
+            at = ", ".join(f"{frame / info.fps:.1f} s" for frame in pipeline.cuts)
+            log(
+                f"note: {source.name} cuts to another shot at {at}; the stages started over "
+                "there (the scene measured afresh where another camera's picture begins)"
+            )
         events = tuple(pipeline.finish_events())
         if events_file is not None:
             event_sink = sinks.enter_context(RecordSink(events_file))

@@ -11,7 +11,7 @@ import functools
 import time
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -30,9 +30,11 @@ from camera_cal import (
     GroundScale,
     SceneGeometry,
     SceneTracker,
+    ShotDetector,
     Undistorter,
     calibrated_scale_height,
     horizon_estimates,
+    same_camera,
     undistorter_for,
 )
 from lanes.config import LaneConfig
@@ -57,6 +59,7 @@ class FrameResult:
     events: tuple[Event, ...] = ()  # the driving events under way at this frame
     scene: SceneGeometry | None = None  # live picture and horizon as of this frame
     timings_ms: dict[str, float] = field(default_factory=dict)
+    shot: int = 0  # shots before this frame's: 0 until the footage's first cut
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +96,7 @@ class _Started:
     timings: dict[str, float]
     held: bool = False  # the stages waited for the horizon: they did not see this frame
     index: int = 0  # frames started before it since `prepare`
+    cut: bool = False  # the first frame of another shot (see `camera_cal.shots`)
 
 
 class Pipeline:
@@ -104,6 +108,11 @@ class Pipeline:
     manager, or call `close`, to stop the worker. The `mounting` the user states (`Mounting`)
     fixes the horizon, sizes the vehicle windows, mirrors the vehicle stage's frames for traffic
     keeping left, and levels the undistorted frames of a turned camera.
+
+    Where edited footage cuts to another shot (`camera_cal.ShotDetector`), the shot starts as a
+    clip does: the stages forget their history, and the scene is measured afresh unless the
+    same camera goes on (see `_scene_after_cut`); the vehicle ids go on counting, and the
+    driving events under way end at the cut.
     """
 
     def __init__(
@@ -127,6 +136,7 @@ class Pipeline:
         self._undistorter: Undistorter | None = None
         self._worker: StageWorker | None = None
         self._geometry: RoadGeometry | None = None
+        self._default_horizon = 0.0  # the default warp's, where a scene starts (see `prepare`)
         self._scene: SceneTracker | None = None
         self._facts: FactsTracker | None = None
         self._events = EventDetector()
@@ -137,6 +147,14 @@ class Pipeline:
         # The vehicles of the last frames finished, by start index: the road's motion of frame k
         # is read around those of frame k - 2 (the newest a worker one frame ahead has done).
         self._vehicle_boxes: deque[tuple[int, NDArray[np.float64]]] = deque(maxlen=3)
+        self._shots = ShotDetector()
+        # The shots cut away from: the last frame, its scene, the tracker (a few, newest last).
+        self._past_shots: deque[tuple[Frame, SceneGeometry, SceneTracker]] = deque(maxlen=4)
+        self._last: tuple[Frame, SceneGeometry] | None = None  # the frame before, its scene
+        self._shot_start = 0  # start index of the current shot's first frame
+        self._id_offset = 0  # vehicle ids the earlier shots used
+        self._last_id = 0
+        self.cuts: list[int] = []  # frame numbers where a new shot started
 
     def __enter__(self) -> Pipeline:
         return self
@@ -165,8 +183,7 @@ class Pipeline:
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
-        lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
-        lanes = self.lanes.config if self.lanes is not None else LaneConfig()
+        self._default_horizon = self._geometry.horizon_y
         # The lanes' ground scale is learned from their width: the warp needs the lanes' width
         # in the picture, whether a higher camera or narrower lanes make it. A car's size
         # depends on the camera's height alone, which the road does not tell: the vehicle
@@ -176,11 +193,38 @@ class Pipeline:
         self._car_scale = (
             1.0 if height is None else round(self._geometry.camera_height_m / height, 3)
         )
+        self._scene = self._new_scene(size, fps)
+        self._facts = FactsTracker(fps)
+        self._events.reset()
+        self._fps, self._frame, self._started = fps, first_frame, 0
+        self._vehicle_boxes.clear()
+        self._shots.reset()
+        self._past_shots.clear()
+        self._last = None
+        self._shot_start = self._id_offset = self._last_id = 0
+        self.cuts = []
+        unknown = self.calibration is None and self.mounting.horizon_y is None
+        self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
+        frame_bytes = size[0] * size[1] * 3
+        if self._worker is not None and self._worker.frame_bytes < frame_bytes:
+            self.close()  # a larger frame than the slots hold: start the worker again
+        for stage in self._stages:
+            stage.reset(fps)
+        if self._worker is not None:
+            self._worker.reset(fps)
+        elif self.vehicles_in_worker and self.vehicles is not None:
+            # Forked now, before any reader/writer thread exists, with fresh stage history.
+            self._worker = StageWorker(self.vehicles, frame_bytes)
+
+    def _new_scene(self, size: tuple[int, int], fps: float) -> SceneTracker:
+        """A scene tracker with no history, for a clip or a shot of frames of `size` at `fps`."""
+        lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
+        lanes = self.lanes.config if self.lanes is not None else LaneConfig()
         # An unknown camera: the stages wait for the footage's horizon (see `_wait`).
         unknown = self.calibration is None and self.mounting.horizon_y is None
-        self._scene = SceneTracker(
+        return SceneTracker(
             size,
-            self._geometry.horizon_y,
+            self._default_horizon,
             self.mounting.horizon_y,
             fixed_scale=lens,
             min_estimates=horizon_estimates(fps),
@@ -196,21 +240,29 @@ class Pipeline:
                 ),
             ),
         )
-        self._facts = FactsTracker(fps)
-        self._events.reset()
-        self._fps, self._frame, self._started = fps, first_frame, 0
-        self._vehicle_boxes.clear()
-        self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
-        frame_bytes = size[0] * size[1] * 3
-        if self._worker is not None and self._worker.frame_bytes < frame_bytes:
-            self.close()  # a larger frame than the slots hold: start the worker again
-        for stage in self._stages:
-            stage.reset(fps)
-        if self._worker is not None:
-            self._worker.reset(fps)
-        elif self.vehicles_in_worker and self.vehicles is not None:
-            # Forked now, before any reader/writer thread exists, with fresh stage history.
-            self._worker = StageWorker(self.vehicles, frame_bytes)
+
+    def _scene_after_cut(self, frame: Frame, ended: SceneTracker) -> SceneTracker:
+        """The scene tracker of the shot the footage cut to at `frame`: the shot's that ended,
+        or an earlier one's, where the same camera shows (its bonnet and overlays look the same,
+        or the road's edges meet at its vanishing point: a compilation of one camera's clips,
+        footage back from a zoomed replay as in the LA clip), else a fresh one. Each shot's is
+        kept for a cut back to it."""
+        assert self.size is not None and self._last is not None
+        self._past_shots.append((*self._last, ended))
+        back = next(
+            (
+                k
+                for k in reversed(range(len(self._past_shots)))
+                if same_camera(self._past_shots[k][0], frame, self._past_shots[k][1])
+                or self._past_shots[k][2].fits(frame)
+            ),
+            None,
+        )
+        if back is None:
+            return self._new_scene(self.size, self._fps)
+        scene = self._past_shots[back][2]
+        del self._past_shots[back]
+        return scene
 
     def finish_events(self) -> list[Event]:
         """End of the clip: every driving event found in it, by start time."""
@@ -245,27 +297,53 @@ class Pipeline:
         t0 = time.perf_counter()
         undistorted = self.undistort(frame)
         timings = {"undistort": (time.perf_counter() - t0) * 1000}
-        assert self._scene is not None
+        assert self._scene is not None and self.size is not None
         t0 = time.perf_counter()
+        index = self._started
+        cut = self._shots.update(undistorted) and self._fps > 0
+        if cut:  # another shot: its scene measured afresh, the stages' history forgotten
+            self._scene = self._scene_after_cut(undistorted, self._scene)
+            self._shot_start = index
+            if self.lanes is not None:
+                self.lanes.reset(self._fps)
+            if self._worker is not None:
+                self._worker.reset_before_next(self._fps)
+            elif self.vehicles is not None:
+                self.vehicles.reset(self._fps)
         scene = self._scene.update(undistorted)
+        self._last = (undistorted, scene)
         timings["scene"] = (time.perf_counter() - t0) * 1000
         placement = self._scene.placement
-        index = self._started
-        held = not scene.estimated and index < self._wait
+        held = not scene.estimated and index - self._shot_start < self._wait
         self._started += 1
         if held:
             waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
-            return _Started(undistorted, scene, placement, waiting, timings, True, index)
+            return _Started(undistorted, scene, placement, waiting, timings, True, index, cut)
         if self._worker is not None:
             self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
         lane = None
         if self.lanes is not None:
             t0 = time.perf_counter()
-            around = next((b for k, b in self._vehicle_boxes if k == index - 2), None)
+            around = next(
+                (b for k, b in self._vehicle_boxes if k == index - 2 and k >= self._shot_start),
+                None,
+            )
             lane = self.lanes.process(undistorted, **placement, vehicles=around)
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
-        return _Started(undistorted, scene, placement, lane, timings, False, index)
+        return _Started(undistorted, scene, placement, lane, timings, False, index, cut)
+
+    def _numbered(self, found: VehicleResult) -> VehicleResult:
+        """`found` with its track ids after those of the earlier shots (each shot's tracker
+        counts from 1), so that an id names one vehicle over the whole footage."""
+        ids = found.detections.ids
+        if len(ids):
+            self._last_id = max(self._last_id, self._id_offset + int(ids.max()))
+        if not self._id_offset or not len(ids):
+            return found
+        d = found.detections
+        moved = np.where(ids > 0, ids + self._id_offset, ids)  # -1: no track yet
+        return replace(found, detections=Detections(d.boxes, d.scores, moved))
 
     def _for_vehicles(self, placement: dict[str, Any], scene: SceneGeometry) -> dict[str, Any]:
         """The placement the vehicle stage takes: the scene's, with the cars' ground scale and
@@ -275,6 +353,12 @@ class Pipeline:
     def _finish(self, started: _Started) -> FrameOutput:
         """Add the vehicles (from the worker, or run here) to the frame's result."""
         undistorted, lane, timings = started.undistorted, started.lane, started.timings
+        if started.cut:  # in frame order: what the last shot left under way ends here
+            self.cuts.append(self._frame)
+            self._id_offset = self._last_id
+            if self._facts is not None:
+                self._facts.reset()
+            self._events.close()
         vehicles = None
         if started.held:
             vehicles = VehicleResult(Detections()) if self.vehicles is not None else None
@@ -289,6 +373,7 @@ class Pipeline:
             )
             timings["vehicles"] = (time.perf_counter() - t0) * 1000
         if vehicles is not None:
+            vehicles = self._numbered(vehicles)
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
         facts = None
         # Metres follow the warp placed from the scene: the lane stage's, or without it the
@@ -333,5 +418,6 @@ class Pipeline:
                 )
             )
         self._frame += 1
-        result = FrameResult(lane, vehicles, facts, events, started.scene, timings)
+        shot = len(self.cuts)
+        result = FrameResult(lane, vehicles, facts, events, started.scene, timings, shot)
         return FrameOutput(undistorted, result)

@@ -61,7 +61,12 @@ def frame_record(
     index: int, time_s: float, size: tuple[int, int], result: FrameResult
 ) -> dict[str, Any]:
     """The record object of one frame."""
-    record: dict[str, Any] = {"frame": index, "time_s": round(time_s, 4), "size": list(size)}
+    record: dict[str, Any] = {
+        "frame": index,
+        "time_s": round(time_s, 4),
+        "size": list(size),
+        "shot": result.shot,
+    }
     if result.scene is not None:
         record["horizon_y"] = round(result.scene.horizon_y, 1)
         record["vanishing_x"] = _rounded(result.scene.vanishing_x, 1)

@@ -18,6 +18,7 @@ from camera_cal.scene import (
     horizon_estimates,
     monochrome,
 )
+from camera_cal.shots import ShotDetector, same_camera
 from camera_cal.undistort import (
     CalibrationMismatch,
     Undistorter,
@@ -34,6 +35,7 @@ __all__ = [
     "GroundScale",
     "SceneGeometry",
     "SceneTracker",
+    "ShotDetector",
     "Undistorter",
     "build_undistorter",
     "calibrate",
@@ -45,6 +47,7 @@ __all__ = [
     "horizon_estimates",
     "load_calibration",
     "monochrome",
+    "same_camera",
     "save_calibration",
     "undistorter_for",
 ]

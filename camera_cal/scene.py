@@ -469,11 +469,30 @@ class SceneTracker:
             cv2.resize(grey, None, fx=self._scale, fy=self._scale, interpolation=cv2.INTER_AREA)
         )
 
-    def _measure(
+    def fits(self, rgb: NDArray[np.uint8], tolerance: tuple[float, float] = (0.03, 0.05)) -> bool:
+        """Whether the road in frame `rgb` meets where this scene's does: its edges' vanishing
+        point within `tolerance` (shares of the height and of the width) of the estimated
+        horizon and column. False before an estimate, and where the frame gives no point. (At
+        a cut in the footage: the same camera goes on, or another's picture starts.)"""
+        current = self._current
+        if not current.estimated or current.vanishing_x is None:
+            return False
+        grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        point = self._point(self._shrink(grey), self._scale, current.live, current.overlays)
+        if point is None:
+            return False
+        x, y = point
+        return (
+            abs(y - current.horizon_y) <= tolerance[0] * self.size[1]
+            and abs(x - current.vanishing_x) <= tolerance[1] * self.size[0]
+        )
+
+    def _point(
         self, small: NDArray[np.uint8], scale: float, live: Box, overlays: tuple[Box, ...]
-    ) -> None:
-        """Add this frame's vanishing point, when the road's edges outside the `overlays` give
-        one (`small`: the picture shrunk by `scale`)."""
+    ) -> tuple[float, float] | None:
+        """The vanishing point (x, y) in frame pixels of the road's edges outside the
+        `overlays`, in the live box below the current horizon (`small`: the picture shrunk by
+        `scale`), or None."""
         x0, y0, x1, y1 = (round(v * scale) for v in live)
         hidden = tuple(scale_box(box, scale) for box in overlays)
         h = y1 - y0
@@ -481,12 +500,21 @@ class SceneTracker:
         top = round(max(self._current.horizon_y * scale, y0 + 0.2 * h) + 0.05 * h)
         segments = road_segments(small, (x0, y0, x1, y1), top, hidden)
         point = vanishing_point(segments, tolerance=0.02 * h)
-        if point is None:
+        if point is None or not x0 <= point[0] < x1:
+            return None
+        return float(point[0]) / scale, float(point[1]) / scale
+
+    def _measure(
+        self, small: NDArray[np.uint8], scale: float, live: Box, overlays: tuple[Box, ...]
+    ) -> None:
+        """Add this frame's vanishing point, when the road's edges outside the `overlays` give
+        one (`small`: the picture shrunk by `scale`)."""
+        estimate = self._point(small, scale, live, overlays)
+        if estimate is None:
             return
-        x, y = point
-        if not x0 <= x < x1:
-            return
-        estimate = (float(x) / scale, float(y) / scale)
+        _, y0, _, y1 = (round(v * scale) for v in live)  # as the shrunk picture's rows
+        h = y1 - y0
+        y = estimate[1] * scale
         if y0 + 0.15 * h <= y <= y0 + 0.8 * h:
             self._estimates.append(estimate)
         elif y0 > 0 and 0.15 * y1 <= y < y0 + 0.15 * h and not self._sky_top:
