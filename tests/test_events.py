@@ -12,6 +12,7 @@ import pytest
 from app.annotators import BANNER, compose, default_annotators
 from app.events import (
     Event,
+    EventDetector,
     FrameSignals,
     event_from_record,
     event_record,
@@ -62,6 +63,24 @@ def test_a_drift_over_the_line_and_back_is_one_departure() -> None:
     # Over 0.95 m from 0.73 s; back inside by the 0.15 m margin (0.8 m) at 2.38 s.
     assert 0.6 < e.start_s < 0.8 and 2.3 < e.end_s < 2.5
     assert e.worst == pytest.approx(1.3, abs=0.01) and e.vehicle_id is None
+
+
+def test_a_cut_ends_the_departure_under_way_and_the_next_shot_has_its_own() -> None:
+    """At a cut in edited footage the excursion under way ends where the last shot left it;
+    the next shot's frames start their own."""
+    offsets = _ramp((0.0, 1.3, 1.0), (1.3, 1.3, 1.0))  # over the line at the cut, 2 s in
+    signals = _series(offsets + _ramp((1.3, 1.3, 1.0), (1.3, 0.0, 1.0), (0.0, 0.0, 2.0)))
+    cut = len(offsets)
+    detector = EventDetector()
+    for k, s in enumerate(signals):
+        if k == cut:
+            detector.close()
+        detector.update(s)
+    events = detector.finish()
+    assert [e.kind for e in events] == ["lane_departure", "lane_departure"]
+    assert events[0].end_frame == cut - 1 and events[1].start_frame == cut
+    # Without the cut: one departure over both.
+    assert len(find_events(signals)) == 1
 
 
 def test_a_brief_touch_and_a_wobble_on_the_line_are_no_flicker() -> None:
