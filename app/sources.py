@@ -72,6 +72,9 @@ class VideoInfo:
     hdr: str | None = None
     # The upright, square-pixel size before `within_size` reduced `size` to it; None: not reduced.
     reduced_from: tuple[int, int] | None = None
+    # Seconds from the file's start to its first video frame (an audio track or an edit list
+    # that starts earlier): where frame k is sought (see `read_frames`).
+    video_start_s: float = 0.0
 
 
 def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
@@ -120,6 +123,8 @@ _ROTATION = re.compile(r"(?:rotation of|rotate\s*:)\s*(-?[\d.]+)")
 _SAR = re.compile(r"\[SAR (\d+):(\d+) DAR")
 _HDR = re.compile(r"\b(smpte2084|arib-std-b67)\b")
 _DURATION = re.compile(r"Duration: (\d+):(\d+):([\d.]+)")
+_FILE_START = re.compile(r"Duration: .*?\bstart: (-?[\d.]+)")
+_STREAM_START = re.compile(r"\bstart (-?[\d.]+)")
 _PACKETS = re.compile(r"frame=\s*(\d+)")
 _LEVEL = re.compile(r"\[(error|fatal)\] (.*)$")
 
@@ -140,6 +145,8 @@ class ProbeFacts:
     rotation: int = 0
     pixel_aspect: float = 1.0
     hdr: str | None = None
+    file_start: float = 0.0  # seconds: the earliest stream's first timestamp
+    video_start: float | None = None  # seconds: the video's first frame's, when ffmpeg says
     errors: list[str] = field(default_factory=list)
 
 
@@ -159,6 +166,8 @@ def parse_probe(text: str) -> ProbeFacts:
         if in_input:
             if (match := _DURATION.search(line)) is not None:
                 facts.duration = _seconds(*match.groups())
+                if (start := _FILE_START.search(line)) is not None:
+                    facts.file_start = float(start.group(1))
             if (match := _STREAM.match(line)) is not None:
                 kind, details = match.groups()
                 in_video = False
@@ -174,6 +183,8 @@ def parse_probe(text: str) -> ProbeFacts:
                         facts.pixel_aspect = int(sar.group(1)) / int(sar.group(2))
                     if (hdr := _HDR.search(details)) is not None:
                         facts.hdr = hdr.group(1)
+                    if (start := _STREAM_START.search(details)) is not None:
+                        facts.video_start = float(start.group(1))
                     in_video = True
             elif in_video and (rotation := _ROTATION.search(line)) is not None:
                 facts.rotation = round(float(rotation.group(1))) % 360
@@ -242,6 +253,7 @@ def probe_video(path: Path) -> VideoInfo:
         rotation=facts.rotation,
         pixel_aspect=facts.pixel_aspect,
         hdr=facts.hdr,
+        video_start_s=max(0.0, (facts.video_start or facts.file_start) - facts.file_start),
     )
 
 
@@ -310,7 +322,11 @@ def read_frames(
     width, height = info.size
     command = [ffmpeg_binary(), "-nostdin", "-loglevel", "error"]
     if start_frame > 0:
-        command += ["-ss", f"{start_frame / info.fps:.6f}"]
+        # The first frame at or after half a frame before frame `start_frame`'s time (ffmpeg
+        # seeks in the file's time, from its start: the LA clip's video starts 2 frames in,
+        # and seeking to 182 / fps gave frame 180).
+        seek = info.video_start_s + (start_frame - 0.5) / info.fps
+        command += ["-ss", f"{seek:.6f}"]
     command += [
         "-i",
         str(path),

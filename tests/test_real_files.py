@@ -378,6 +378,24 @@ def test_webm_in_webm_out_and_other_containers_default_to_mp4(
     assert count_frames(tmp_path / "clip_roadview.mp4")[1] == probe_video(ts).n_frames
 
 
+def test_a_frame_sought_is_the_frame_of_that_number(test_video: Path, tmp_path: Path) -> None:
+    """`--start` and `debug --frames` seek: in a file whose video starts after its audio (3
+    frames here; the LA clip's 2, the night clip's 1.4) frame k was sought at k / fps of the
+    file's time and came out 3 frames early, so the record numbered frame k - 3 as k."""
+    late = tmp_path / "late.mp4"
+    ffmpeg(
+        "-f", "lavfi", "-i", "sine=d=2", "-itsoffset", "0.12", "-i", test_video,
+        "-map", "1:v", "-map", "0:a", "-c:v", "copy", "-c:a", "aac", late,
+    )  # fmt: skip
+    info = probe_video(late)
+    assert info.video_start_s == pytest.approx(0.12)
+    in_order = list(read_frames(late, info))
+    for k in (1, 4, 20, 37):
+        sought = next(iter(read_frames(late, info, k)))
+        assert np.array_equal(sought, in_order[k]), k
+    assert probe_video(test_video).video_start_s == 0.0
+
+
 @pytest.mark.parametrize("audio", ["short", "long", "rate8k", "rate44k", "silent"])
 def test_every_frame_is_written_whatever_the_audio(
     made: dict[str, Path], tmp_path: Path, audio: str
