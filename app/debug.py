@@ -219,7 +219,8 @@ def run_debug(
             written.append(path)
         names = list(pictures)
         done.append(index)
-        log(f"frame {index}: {len(pictures)} pictures")
+        shot = f" (shot {out.result.shot} of the edited footage)" if out.result.shot else ""
+        log(f"frame {index}: {len(pictures)} pictures{shot}")
     index_path = out_dir / "index.html"
     index_path.write_text(contact_sheet(done, names))
     written.append(index_path)
