@@ -162,7 +162,9 @@ def process_video(
                     output,
                     info.size,
                     info.fps,
-                    AudioSpan(source, first / info.fps, (last - first) / info.fps)
+                    AudioSpan(
+                        source, info.video_start_s + first / info.fps, (last - first) / info.fps
+                    )
                     if info.has_audio
                     else None,
                 )

@@ -396,6 +396,31 @@ def test_a_frame_sought_is_the_frame_of_that_number(test_video: Path, tmp_path: 
     assert probe_video(test_video).video_start_s == 0.0
 
 
+def test_the_sound_stays_with_the_picture_when_the_video_starts_late(
+    test_video: Path, tmp_path: Path
+) -> None:
+    """A file whose sound starts 0.2 s before its first frame (silence, then a tone from the
+    first frame on): the output's sound starts with its first frame, as it played with it.
+    It was copied from the file's start: 0.2 s of silence, the sound late by as much."""
+    late = tmp_path / "late.mp4"
+    ffmpeg(
+        "-f", "lavfi", "-i", "aevalsrc='if(lt(t,0.2),0,0.5*sin(2*PI*440*t))':d=2:s=48000",
+        "-itsoffset", "0.2", "-i", test_video, "-map", "1:v", "-map", "0:a", "-c:v", "copy",
+        "-c:a", "aac", late,
+    )  # fmt: skip
+    out = tmp_path / "out.mp4"
+    result = run_cli("process", late, "-o", out, "--no-lanes", "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    pcm = subprocess.run(
+        [ffmpeg_binary(), "-loglevel", "error", "-i", str(out), "-map", "0:a", "-f", "f32le",
+         "-ac", "1", "-ar", "48000", "-"],
+        capture_output=True, check=True,
+    ).stdout  # fmt: skip
+    sound = np.frombuffer(pcm, np.float32)
+    loudness = [float(np.sqrt(np.mean(sound[a:b] ** 2))) for a, b in ((0, 4800), (4800, 9600))]
+    assert min(loudness) > 0.2, loudness  # the tone from the start: no silence first
+
+
 @pytest.mark.parametrize("audio", ["short", "long", "rate8k", "rate44k", "silent"])
 def test_every_frame_is_written_whatever_the_audio(
     made: dict[str, Path], tmp_path: Path, audio: str
