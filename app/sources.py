@@ -253,7 +253,11 @@ def probe_video(path: Path) -> VideoInfo:
         rotation=facts.rotation,
         pixel_aspect=facts.pixel_aspect,
         hdr=facts.hdr,
-        video_start_s=max(0.0, (facts.video_start or facts.file_start) - facts.file_start),
+        video_start_s=max(
+            0.0,
+            (facts.file_start if facts.video_start is None else facts.video_start)
+            - facts.file_start,
+        ),
     )
 
 

@@ -17,7 +17,7 @@ import pytest
 from app import sources
 from app.evaluate import evaluate, load_labels
 from app.sinks import VideoWriter
-from app.sources import ffmpeg_binary, probe_video, read_frames
+from app.sources import ffmpeg_binary, parse_probe, probe_video, read_frames
 from camera_cal import default_calibration_path
 from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
 
@@ -394,6 +394,20 @@ def test_a_frame_sought_is_the_frame_of_that_number(test_video: Path, tmp_path: 
         sought = next(iter(read_frames(late, info, k)))
         assert np.array_equal(sought, in_order[k]), k
     assert probe_video(test_video).video_start_s == 0.0
+
+
+def test_the_starts_ffmpeg_reports_are_read_even_at_zero_or_below() -> None:
+    """The file's start (the earliest track's) and the video's, as ffmpeg's log gives them: a
+    video at 0 in a file starting at -0.04 s (an audio track's priming) starts 0.04 s in."""
+    log = (
+        "Input #0, mov,mp4,m4a,3gp,3g2,mj2, from 'x.mp4':\n"
+        "  Duration: 00:00:02.00, start: -0.040000, bitrate: 3276 kb/s\n"
+        "  Stream #0:0[0x1](und): Video: h264 (High) (avc1 / 0x31637661), yuv420p, "
+        "1280x720 [SAR 1:1 DAR 16:9], 4204 kb/s, 25 fps, 25 tbr, 12800 tbn, start 0.000000\n"
+        "  Stream #0:1[0x2](und): Audio: aac (LC), 48000 Hz, mono, fltp, start -0.040000\n"
+    )
+    facts = parse_probe(log)
+    assert facts.file_start == -0.04 and facts.video_start == 0.0 and facts.audio
 
 
 def test_the_sound_stays_with_the_picture_when_the_video_starts_late(
