@@ -2,8 +2,9 @@
 shot, whose camera, horizon and road have nothing to do with the last frame's.
 
 Driving footage changes little from one frame to the next when seen very small: on the shared
-and wild clips a 32x18 grey thumbnail moves by at most 16 grey levels a pixel (a dark underpass
-entered), and the frame's colours (a hue and saturation histogram) by at most 15 % of their mass.
+and wild clips a 32x18 grey thumbnail moves by at most 16 grey levels a pixel (15 entering the
+challenge clip's underpass), and the frame's colours (a hue and saturation histogram) by at most
+15 % of their mass.
 The LA clip's cuts to a zoomed view and back move them by 49-52 levels and 38-46 %.
 """
 
