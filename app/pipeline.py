@@ -203,8 +203,7 @@ class Pipeline:
         self._last = None
         self._shot_start = self._id_offset = self._last_id = 0
         self.cuts = []
-        unknown = self.calibration is None and self.mounting.horizon_y is None
-        self._wait = round(HORIZON_WAIT_S * fps) if unknown else 0
+        self._wait = round(HORIZON_WAIT_S * fps) if self._unknown_camera else 0
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:
             self.close()  # a larger frame than the slots hold: start the worker again
@@ -216,19 +215,23 @@ class Pipeline:
             # Forked now, before any reader/writer thread exists, with fresh stage history.
             self._worker = StageWorker(self.vehicles, frame_bytes)
 
+    @property
+    def _unknown_camera(self) -> bool:
+        """Neither a calibration nor `--horizon`: the stages wait for the footage's own horizon
+        (see `_wait`), and the scene measures it hard while they do."""
+        return self.calibration is None and self.mounting.horizon_y is None
+
     def _new_scene(self, size: tuple[int, int], fps: float) -> SceneTracker:
         """A scene tracker with no history, for a clip or a shot of frames of `size` at `fps`."""
         lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
         lanes = self.lanes.config if self.lanes is not None else LaneConfig()
-        # An unknown camera: the stages wait for the footage's horizon (see `_wait`).
-        unknown = self.calibration is None and self.mounting.horizon_y is None
         return SceneTracker(
             size,
             self._default_horizon,
             self.mounting.horizon_y,
             fixed_scale=lens,
             min_estimates=horizon_estimates(fps),
-            full_size_first=unknown,
+            full_size_first=self._unknown_camera,
             # Lane widths over 10 s, believed after 1 s of them (counts at 25 fps for a still),
             # moved when they are ones the lane finder does not believe.
             ground=GroundScale(
