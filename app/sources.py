@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import re
 import subprocess
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from queue import Empty, Queue
@@ -75,6 +76,10 @@ class VideoInfo:
     # Seconds from the file's start to its first video frame (an audio track or an edit list
     # that starts earlier): where frame k is sought (see `read_frames`).
     video_start_s: float = 0.0
+    # A variable frame rate (a phone's video slows in low light): the presentation times of
+    # the decoded frames, in seconds from the first; they are read at the steady `fps` the
+    # video mostly runs at, each frame shown where it plays (`steady_sources`). None: steady.
+    frame_times: tuple[float, ...] | None = None
 
 
 def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
@@ -127,6 +132,8 @@ _FILE_START = re.compile(r"Duration: .*?\bstart: (-?[\d.]+)")
 _STREAM_START = re.compile(r"\bstart (-?[\d.]+)")
 _PACKETS = re.compile(r"frame=\s*(\d+)")
 _LEVEL = re.compile(r"\[(error|fatal)\] (.*)$")
+_TIME_BASE = re.compile(r"^#tb 0: (\d+)/(\d+)")
+_NO_PTS = -(2**63)
 
 
 def _seconds(h: str, m: str, s: str) -> float:
@@ -195,11 +202,59 @@ def parse_probe(text: str) -> ProbeFacts:
     return facts
 
 
+def packet_times(text: str, start: float = 0.0) -> NDArray[np.float64]:
+    """The presentation times, in seconds from the first, of the packets that `ffmpeg -f
+    framecrc` lists (in decoding order: sorted here), leaving out those before `start`, the
+    video's first time (an edit list's, which decoding drops)."""
+    scale, found = 0.0, []
+    for line in text.splitlines():
+        if (base := _TIME_BASE.match(line)) is not None:
+            scale = int(base.group(1)) / int(base.group(2))
+        elif line and not line.startswith("#"):
+            fields = line.split(",")
+            if len(fields) > 2 and fields[2].strip().lstrip("-").isdigit():
+                found.append(int(fields[2]))
+    pts = np.sort(np.array([v for v in found if v != _NO_PTS], dtype=np.float64)) * scale
+    pts = pts[pts >= start - 1e-6]
+    return pts - pts[0] if len(pts) else pts
+
+
+def variable_rate(times: NDArray[np.float64], max_drift_s: float = 0.1) -> float | None:
+    """The steady rate to read a video at whose frames stray from any steady rate by more than
+    `max_drift_s` (audio and video noticeably apart), or None for a steady video.
+
+    The rate is the one the video mostly runs at: its median frame step, averaged over the
+    steps near it (a 29.97 fps step in milliseconds alternates 33 and 34). A frame dropped now
+    and then strays by a step at most and is left alone.
+    """
+    if len(times) < 3:
+        return None
+    steps = np.diff(times)
+    line = times[0] + (times[-1] - times[0]) * np.arange(len(times)) / (len(times) - 1)
+    if float(np.abs(times - line).max()) <= max_drift_s:
+        return None
+    usual = float(np.median(steps[steps > 0]))
+    near = steps[np.abs(steps - usual) <= 0.1 * usual]
+    return 1.0 / float(near.mean())
+
+
+def steady_sources(times: NDArray[np.float64], fps: float) -> NDArray[np.intp]:
+    """For each frame of a variable-rate video read at a steady `fps`, the index of the decoded
+    frame that plays at its time (the nearest): repeated where the video ran slower, skipping
+    frames where it ran faster."""
+    slots = np.arange(round(float(times[-1]) * fps) + 1) / fps
+    after = np.clip(np.searchsorted(times, slots), 1, len(times) - 1)
+    before = after - 1
+    nearer_before = slots - times[before] <= times[after] - slots
+    return np.where(nearer_before, before, after)
+
+
 def probe_video(path: Path) -> VideoInfo:
     """Size (as decoded, rotation applied), rate, frame count and audio of a video.
 
-    One ffmpeg pass copies every video packet to nowhere: cheap (no decoding), and it reads the
-    whole file, so truncation shows here, before any output is started.
+    One ffmpeg pass lists every video packet's time (no decoding): cheap, and it reads the
+    whole file, so truncation shows here, before any output is started; the times tell a
+    variable frame rate.
     """
     check_input(path)
     command = [
@@ -215,7 +270,7 @@ def probe_video(path: Path) -> VideoInfo:
         "-c",
         "copy",
         "-f",
-        "null",
+        "framecrc",
         "-",
     ]
     try:
@@ -235,9 +290,21 @@ def probe_video(path: Path) -> VideoInfo:
     # Packets can exceed frames (an edit list may drop a few at the start) and the duration
     # can exceed the video (a longer audio track): the smaller is the estimate. The decoded
     # count is what the drivers go by.
-    n_frames = round(facts.duration * facts.fps)
-    if facts.packets is not None:
-        n_frames = min(n_frames, facts.packets) if n_frames > 0 else facts.packets
+    video_start_s = max(
+        0.0,
+        (facts.file_start if facts.video_start is None else facts.video_start) - facts.file_start,
+    )
+    # The listed times are the file's, counted from its start, as the seeks are.
+    times = packet_times(done.stdout.decode(errors="replace"), video_start_s)
+    steady = variable_rate(times) if facts.fps > 0 else None
+    frame_times = None
+    if steady is not None:
+        facts.fps, frame_times = steady, tuple(float(t) for t in times)
+        n_frames = len(steady_sources(times, steady))
+    else:
+        n_frames = round(facts.duration * facts.fps)
+        if facts.packets is not None:
+            n_frames = min(n_frames, facts.packets) if n_frames > 0 else facts.packets
     duration = n_frames / facts.fps if facts.fps > 0 else 0.0
     if facts.fps <= 0 or min(facts.size) <= 0 or n_frames <= 0:
         raise InputError(f"{path} has no video frames; the file may be truncated or empty")
@@ -253,11 +320,8 @@ def probe_video(path: Path) -> VideoInfo:
         rotation=facts.rotation,
         pixel_aspect=facts.pixel_aspect,
         hdr=facts.hdr,
-        video_start_s=max(
-            0.0,
-            (facts.file_start if facts.video_start is None else facts.video_start)
-            - facts.file_start,
-        ),
+        video_start_s=video_start_s,
+        frame_times=frame_times,
     )
 
 
@@ -278,6 +342,18 @@ def decoding_notes(info: VideoInfo) -> list[str]:
         notes.append(
             f"pixels stored {info.pixel_aspect:.3g} times as wide as tall: stretched square, "
             f"{shown[0]}x{shown[1]}"
+        )
+    if info.frame_times is not None:
+        times = np.asarray(info.frame_times)
+        sources = steady_sources(times, info.fps)
+        distinct = len(np.unique(sources))
+        steps = np.diff(times)
+        rates = 1.0 / np.percentile(steps[steps > 0], [95, 5])
+        notes.append(
+            f"a variable frame rate ({rates[0]:.0f}-{rates[1]:.0f} fps): read at a steady "
+            f"{info.fps:.4g} fps, each frame where it plays ({len(sources) - distinct} shown "
+            f"twice or more, {len(times) - distinct} skipped), so the output keeps time with "
+            "the sound"
         )
     if info.reduced_from is not None:
         (fw, fh), (w, h) = info.reduced_from, info.size
@@ -318,19 +394,55 @@ SDR_TONE_MAP = (
 def read_frames(
     path: Path, info: VideoInfo, start_frame: int = 0, end_frame: int | None = None
 ) -> Iterator[Frame]:
-    """Decoded upright RGB frames in order, from `start_frame` up to (not including) `end_frame`.
+    """Decoded upright RGB frames in order, from `start_frame` up to (not including) `end_frame`:
+    frame k is the picture that plays k / fps after the first (a variable-rate video's frames
+    repeated or skipped to a steady rate, see `VideoInfo.frame_times`)."""
+    if info.frame_times is None:
+        # The first frame at or after half a frame before frame `start_frame`'s time (ffmpeg
+        # seeks in the file's time, from its start: the LA clip's video starts 2 frames in,
+        # and seeking to 182 / fps gave frame 180).
+        seek = info.video_start_s + (start_frame - 0.5) / info.fps if start_frame > 0 else None
+        decoded = _decode(path, info, seek)
+        count = None if end_frame is None else max(0, end_frame - start_frame)
+        try:
+            yield from itertools.islice(decoded, count)
+        finally:
+            decoded.close()
+        return
+    times = np.asarray(info.frame_times)
+    sources = steady_sources(times, info.fps)
+    end = len(sources) if end_frame is None else min(end_frame, len(sources))
+    if start_frame >= end:
+        return
+    first = int(sources[start_frame])
+    # Sought half way from the frame before: the decoder starts at the frame wanted.
+    seek = info.video_start_s + (times[first - 1] + times[first]) / 2 if first > 0 else None
+    decoded = _decode(path, info, seek)
+    index, frame = first - 1, None
+    try:
+        for k in range(start_frame, end):
+            while index < sources[k]:
+                frame = next(decoded, None)
+                if frame is None:
+                    return
+                index += 1
+            assert frame is not None
+            yield frame
+    finally:
+        decoded.close()
+
+
+def _decode(path: Path, info: VideoInfo, seek_s: float | None) -> Generator[Frame, None, None]:
+    """Every frame ffmpeg decodes, in order, from the first at or after `seek_s` (seconds of
+    the file's time) or from the start.
 
     ffmpeg's messages go to a temporary file, not a pipe: a pipe nobody reads fills up and stalls
     the decoder on a file with many warnings.
     """
     width, height = info.size
     command = [ffmpeg_binary(), "-nostdin", "-loglevel", "error"]
-    if start_frame > 0:
-        # The first frame at or after half a frame before frame `start_frame`'s time (ffmpeg
-        # seeks in the file's time, from its start: the LA clip's video starts 2 frames in,
-        # and seeking to 182 / fps gave frame 180).
-        seek = info.video_start_s + (start_frame - 0.5) / info.fps
-        command += ["-ss", f"{seek:.6f}"]
+    if seek_s is not None:
+        command += ["-ss", f"{seek_s:.6f}"]
     command += [
         "-i",
         str(path),
@@ -363,14 +475,9 @@ def read_frames(
             command, stdout=subprocess.PIPE, stderr=log, bufsize=frame_bytes * 2
         )
         assert process.stdout is not None
-        index = start_frame
         try:
-            while end_frame is None or index < end_frame:
-                data = _read_exactly(process.stdout, frame_bytes)
-                if data is None:
-                    break
+            while (data := _read_exactly(process.stdout, frame_bytes)) is not None:
                 yield np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
-                index += 1
         finally:
             process.kill()
             process.wait()

@@ -396,6 +396,56 @@ def test_a_frame_sought_is_the_frame_of_that_number(test_video: Path, tmp_path: 
     assert probe_video(test_video).video_start_s == 0.0
 
 
+def test_steady_rates_are_told_from_variable_ones() -> None:
+    """A phone's video slowing to 15 fps reads at its usual 30; a steady 29.97 fps in
+    millisecond steps over ten minutes, or a frame dropped now and then, is left alone."""
+    thirty = np.arange(30) / 30
+    halves = np.concatenate([thirty, 1 + np.arange(15) * 2 / 30])
+    assert sources.variable_rate(halves) == pytest.approx(30)
+    assert sources.variable_rate(np.round(np.arange(18000) / 29.97, 3)) is None
+    assert sources.variable_rate(np.delete(np.arange(300) / 30, [50, 200])) is None
+    shown = sources.steady_sources(halves, 30)
+    assert len(shown) == 59 and np.all(np.abs(halves[shown] - np.arange(59) / 30) <= 1 / 30 + 1e-9)
+
+
+def test_variable_rate_video_is_read_as_it_plays(tmp_path: Path) -> None:
+    """Each frame of a variable-rate file (30 fps for 1 s, then 15) is the picture that plays
+    at its time, read in order or sought: frame k's grey is 4 k. Read as decoded, the 15 fps
+    second went by in half a second (45 frames, frame 40's grey 200 instead of 160)."""
+    vfr = tmp_path / "vfr.mkv"
+    ffmpeg(
+        "-f", "lavfi", "-i", "color=c=black:s=64x48:r=30:d=2,format=gray,geq=lum='4*N'",
+        "-vf", "select='lt(n,30)+not(mod(n,2))'", "-fps_mode", "vfr", "-c:v", "ffv1", vfr,
+    )  # fmt: skip
+    info = probe_video(vfr)
+    assert info.fps == pytest.approx(30) and info.n_frames == 59 and info.frame_times
+    frames = list(read_frames(vfr, info))
+    greys = np.array([float(f.mean()) for f in frames])
+    assert len(frames) == 59 and np.all(np.abs(greys - 4 * np.arange(59)) <= 4.5), greys
+    for k in (31, 44, 45, 58):
+        assert np.array_equal(next(iter(read_frames(vfr, info, k))), frames[k]), k
+    assert len(list(read_frames(vfr, info, 40, 50))) == 10
+    assert any("variable frame rate (15-30 fps)" in n for n in sources.decoding_notes(info))
+
+
+def test_variable_rate_video_keeps_time_with_its_sound(test_video: Path, tmp_path: Path) -> None:
+    """test_video with every other frame of its last 18 left out (a phone slowing down): the
+    output keeps pace with the sound to its last frame (1.44 s in, the 37th), frame k of the
+    record at k / 25 s. Written as decoded, it had 29 frames and ended 0.36 s early."""
+    vfr = tmp_path / "vfr.mp4"
+    ffmpeg(
+        "-i", test_video, "-f", "lavfi", "-i", "sine=d=1.52", "-map", "0:v", "-map", "1:a",
+        "-vf", "select='lt(n,20)+not(mod(n,2))'", "-fps_mode", "vfr", "-c:a", "aac", vfr,
+    )  # fmt: skip
+    out, record = tmp_path / "out.mp4", tmp_path / "out.jsonl"
+    result = run_cli("process", vfr, "-o", out, "--json", record, "--no-vehicles")
+    assert result.returncode == 0, result.stderr
+    assert "variable frame rate" in result.stderr
+    rows = read_record(record)
+    assert len(rows) == count_frames(out)[1] == 37
+    assert rows[30]["time_s"] == pytest.approx(30 / 25)
+
+
 def test_the_starts_ffmpeg_reports_are_read_even_at_zero_or_below() -> None:
     """The file's start (the earliest track's) and the video's, as ffmpeg's log gives them: a
     video at 0 in a file starting at -0.04 s (an audio track's priming) starts 0.04 s in."""
