@@ -278,6 +278,8 @@ def probe_video(path: Path) -> VideoInfo:
     except (OSError, subprocess.TimeoutExpired) as error:
         raise InputError(f"ffmpeg could not read {path} ({error})") from None
     facts = parse_probe(done.stderr.decode(errors="replace"))
+    if facts.size is None and facts.audio:
+        raise InputError(f"{path} has sound but no picture; pass a video file")
     if facts.size is None:
         raise InputError(
             f"{path} is not a video ffmpeg can read; pass an .mp4/.mov/.mkv/.webm file"

@@ -21,7 +21,8 @@ from tests.helpers import assert_one_line_error, count_frames, read_record, run_
 
 @pytest.fixture(scope="module")
 def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[str, Path]:
-    """Short derived clips: other sizes, a grey one, a truncated file, an empty one."""
+    """Short derived clips: other sizes, a grey one, a fade from black, a truncated file, an
+    empty one."""
     folder = tmp_path_factory.mktemp("clips")
     out = {}
     # The 960x540 clip is longer: without a calibration the stages wait for the horizon first.
@@ -32,6 +33,7 @@ def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[st
         ("wide960", "960:540,setsar=1", "1.2"),
         ("square", "640:480,setsar=1", "0.4"),
         ("grey", "640:360,setsar=1,hue=s=0", "0.4"),
+        ("fade", "640:360,setsar=1,fade=in:0:8", "0.6"),
     ):
         out[name] = folder / f"{name}.mp4"
         subprocess.run(
@@ -79,6 +81,14 @@ def test_a_monochrome_video_is_told_of(clips: dict[str, Path], tmp_path: Path) -
     ]
     quiet = run_cli("process", clips["grey"], "-o", tmp_path / "p.mp4", "--no-vehicles")
     assert quiet.returncode == 0 and "monochrome" not in quiet.stderr
+
+
+def test_a_fade_from_black_is_not_monochrome(clips: dict[str, Path], tmp_path: Path) -> None:
+    """A clip that fades in from black (a camera starting up, an edited video) has no colour
+    in its first frames: it was told of as monochrome from its first frame."""
+    result = run_cli("process", clips["fade"], "-o", tmp_path / "o.mp4")
+    assert result.returncode == 0, result.stderr
+    assert "monochrome" not in result.stderr
 
 
 def test_other_camera_with_calibration_none(clips: dict[str, Path], tmp_path: Path) -> None:

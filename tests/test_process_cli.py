@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -78,6 +79,20 @@ def test_not_a_video(tmp_path: Path) -> None:
     out = tmp_path / "out.mp4"
     result = run_cli("process", fake, "-o", out)
     assert_one_line_error(result, "not a video")
+    assert not out.exists()
+
+
+def test_sound_without_a_picture(tmp_path: Path) -> None:
+    """An audio file (a dashcam's sound exported alone) is told apart from a damaged video."""
+    from app.sources import ffmpeg_binary
+
+    sound = tmp_path / "sound.m4a"
+    subprocess.run(
+        [ffmpeg_binary(), "-loglevel", "error", "-f", "lavfi", "-i", "sine=d=1", str(sound)],
+        check=True,
+    )
+    out = tmp_path / "out.mp4"
+    assert_one_line_error(run_cli("process", sound, "-o", out), "sound but no picture")
     assert not out.exists()
 
 
