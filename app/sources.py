@@ -80,6 +80,9 @@ class VideoInfo:
     # the decoded frames, in seconds from the first; they are read at the steady `fps` the
     # video mostly runs at, each frame shown where it plays (`steady_sources`). None: steady.
     frame_times: tuple[float, ...] | None = None
+    # Stored as fields (a camcorder's or a broadcast's 1080i): decoded, each frame is
+    # deinterlaced, else a moving car's rows alternate between two moments (combing).
+    interlaced: bool = False
 
 
 def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
@@ -126,6 +129,7 @@ _SIZE = re.compile(r"(?:^|[ ,])(\d{1,5})x(\d{1,5})(?:[ ,]|$)")
 _RATE = re.compile(r"([\d.]+)(k?) (fps|tbr)")
 _ROTATION = re.compile(r"(?:rotation of|rotate\s*:)\s*(-?[\d.]+)")
 _SAR = re.compile(r"\[SAR (\d+):(\d+) DAR")
+_FIELDS = re.compile(r"\b(?:top|bottom) (?:coded )?first\b")
 _HDR = re.compile(r"\b(smpte2084|arib-std-b67)\b")
 _DURATION = re.compile(r"Duration: (\d+):(\d+):([\d.]+)")
 _FILE_START = re.compile(r"Duration: .*?\bstart: (-?[\d.]+)")
@@ -152,6 +156,7 @@ class ProbeFacts:
     rotation: int = 0
     pixel_aspect: float = 1.0
     hdr: str | None = None
+    interlaced: bool = False
     file_start: float = 0.0  # seconds: the earliest stream's first timestamp
     video_start: float | None = None  # seconds: the video's first frame's, when ffmpeg says
     errors: list[str] = field(default_factory=list)
@@ -188,6 +193,7 @@ def parse_probe(text: str) -> ProbeFacts:
                     sar = _SAR.search(details)
                     if sar is not None and int(sar.group(1)) > 0 and int(sar.group(2)) > 0:
                         facts.pixel_aspect = int(sar.group(1)) / int(sar.group(2))
+                    facts.interlaced = _FIELDS.search(details) is not None
                     if (hdr := _HDR.search(details)) is not None:
                         facts.hdr = hdr.group(1)
                     if (start := _STREAM_START.search(details)) is not None:
@@ -322,6 +328,7 @@ def probe_video(path: Path) -> VideoInfo:
         rotation=facts.rotation,
         pixel_aspect=facts.pixel_aspect,
         hdr=facts.hdr,
+        interlaced=facts.interlaced,
         video_start_s=video_start_s,
         frame_times=frame_times,
     )
@@ -339,6 +346,8 @@ def decoding_notes(info: VideoInfo) -> list[str]:
             "decoded as it is, darker and greyer than meant (unset IMAGEIO_FFMPEG_EXE to use "
             "imageio-ffmpeg's own)"
         )
+    if info.interlaced:
+        notes.append("interlaced video: deinterlaced while decoding")
     if not square(info.pixel_aspect):
         shown = info.reduced_from or info.size
         notes.append(
@@ -454,6 +463,9 @@ def _decode(path: Path, info: VideoInfo, seek_s: float | None) -> Generator[Fram
         "passthrough",
     ]
     filters = []
+    if info.interlaced:
+        # One frame out per frame in (the rate kept), only frames flagged interlaced touched.
+        filters.append("bwdif=mode=send_frame:deint=interlaced")
     if info.hdr is not None and can_tone_map():
         filters.append(SDR_TONE_MAP)
     if info.reduced_from is not None:

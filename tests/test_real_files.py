@@ -8,11 +8,13 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from app import sources
 from app.evaluate import evaluate, load_labels
@@ -444,6 +446,32 @@ def test_variable_rate_video_keeps_time_with_its_sound(test_video: Path, tmp_pat
     rows = read_record(record)
     assert len(rows) == count_frames(out)[1] == 37
     assert rows[30]["time_s"] == pytest.approx(30 / 25)
+
+
+def test_interlaced_video_is_deinterlaced(tmp_path: Path) -> None:
+    """A white bar crossing the picture fast, stored as fields (25i of 50 moments a second):
+    decoded as stored, its rows alternate between two places (combing: neighbouring rows
+    differ at its edges by most of the white); deinterlaced, they agree."""
+    fields = tmp_path / "interlaced.mp4"
+    ffmpeg(
+        "-f", "lavfi", "-i", "color=c=black:s=320x240:r=50:d=1",
+        "-f", "lavfi", "-i", "color=c=white:s=30x160:r=50", "-filter_complex",
+        "[0][1]overlay=x='mod(t*600,280)':y=40:shortest=1,"
+        "tinterlace=mode=interleave_top,setfield=tff",
+        "-c:v", "libx264", "-flags", "+ildct+ilme", "-x264-params", "tff=1", fields,
+    )  # fmt: skip
+    info = probe_video(fields)
+    assert info.interlaced and info.fps == pytest.approx(25)
+    assert "interlaced video: deinterlaced while decoding" in sources.decoding_notes(info)
+
+    def combing(frames: list[NDArray[np.uint8]]) -> float:
+        rows = np.stack(frames)[:, 40:200].astype(np.float64)
+        return float(np.abs(rows[:, 1:] - rows[:, :-1]).mean())
+
+    stored = list(read_frames(fields, replace(info, interlaced=False)))
+    deinterlaced = list(read_frames(fields, info))
+    assert len(deinterlaced) == len(stored) == 25
+    assert combing(deinterlaced) < 0.3 * combing(stored), (combing(deinterlaced), combing(stored))
 
 
 def test_the_starts_ffmpeg_reports_are_read_even_at_zero_or_below() -> None:
