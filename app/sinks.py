@@ -191,6 +191,9 @@ class VideoWriter:
         video = list(container.video)
         if "-preset" in video:
             video[video.index("-preset") + 1] = preset
+        # Tagged with the matrix the frames were converted with: untagged HD video is shown as
+        # BT.709 by most players (mpv, VLC, browsers), a red 601 red read so with 23 of green.
+        video += ["-colorspace", "smpte170m", "-color_range", "tv"]
         command += [*video, str(path)]
         # Messages go to a file: a full stderr pipe would stall ffmpeg and then this writer.
         self._log = tempfile.TemporaryFile()  # noqa: SIM115 (lives as long as the writer)

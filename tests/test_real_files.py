@@ -353,6 +353,11 @@ def test_written_colours_are_the_frames_colours_at_any_size(
     writer.close()
     info = probe_video(out)
     assert info.size == (96, 32) and info.n_frames == 5
+    # The matrix the frames were converted with is named (players show untagged HD as BT.709).
+    header = subprocess.run(
+        [ffmpeg_binary(), "-hide_banner", "-i", str(out)], capture_output=True, text=True
+    ).stderr
+    assert "smpte170m" in header or "bt470bg" in header, header
     read = next(read_frames(out, info)).astype(int)
     for k, colour in enumerate(colours):
         inner = read[4:12, 16 * k + 4 : 16 * k + 12]
