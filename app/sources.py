@@ -185,6 +185,8 @@ def parse_probe(text: str) -> ProbeFacts:
                 in_video = False
                 if kind == "Audio":
                     facts.audio = True
+                elif "(attached pic)" in details:
+                    pass  # a cover picture (a song's, a podcast's), not video
                 elif facts.size is None and (size := _SIZE.search(details)) is not None:
                     facts.size = (int(size.group(1)), int(size.group(2)))
                     found = _RATE.findall(details)

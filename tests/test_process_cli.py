@@ -94,6 +94,18 @@ def test_sound_without_a_picture(tmp_path: Path) -> None:
     out = tmp_path / "out.mp4"
     assert_one_line_error(run_cli("process", sound, "-o", out), "sound but no picture")
     assert not out.exists()
+    # With a cover picture, which ffmpeg lists as a video stream: it was processed as a
+    # one-frame video at 90,000 frames a second.
+    cover, song = tmp_path / "cover.png", tmp_path / "song.mp3"
+    cv2.imwrite(str(cover), np.full((90, 160, 3), 128, np.uint8))
+    subprocess.run(
+        [ffmpeg_binary(), "-loglevel", "error", "-i", str(sound), "-i", str(cover),
+         "-map", "0", "-map", "1", "-c:v", "mjpeg", "-disposition:v:0", "attached_pic",
+         str(song)],
+        check=True,
+    )  # fmt: skip
+    assert_one_line_error(run_cli("process", song, "-o", out), "sound but no picture")
+    assert not out.exists()
 
 
 def test_unwritable_output(test_video: Path, tmp_path: Path) -> None:
