@@ -257,6 +257,15 @@ def steady_sources(times: NDArray[np.float64], fps: float) -> NDArray[np.intp]:
     return np.where(nearer_before, before, after)
 
 
+def _cut_off_mp4(path: Path, errors: list[str]) -> bool:
+    """Whether `path` is an MP4/MOV (it opens with an `ftyp` box) whose index ffmpeg did not
+    find: a recording cut off before the camera wrote it last (any other file named .mp4 gets
+    the same complaint from ffmpeg)."""
+    with path.open("rb") as handle:
+        head = handle.read(8)
+    return head[4:8] == b"ftyp" and any("moov atom not found" in e for e in errors)
+
+
 def probe_video(path: Path) -> VideoInfo:
     """Size (as decoded, rotation applied), rate, frame count and audio of a video.
 
@@ -286,6 +295,12 @@ def probe_video(path: Path) -> VideoInfo:
     except (OSError, subprocess.TimeoutExpired) as error:
         raise InputError(f"ffmpeg could not read {path} ({error})") from None
     facts = parse_probe(done.stderr.decode(errors="replace"))
+    if facts.size is None and _cut_off_mp4(path, facts.errors):
+        raise InputError(
+            f"{path} ends before its index (moov atom) was written: the recording was cut off "
+            "(a dashcam losing power, a copy stopped); a repair tool such as untrunc rebuilds "
+            "it with a good file of the same camera"
+        )
     if facts.size is None and facts.audio:
         raise InputError(f"{path} has sound but no picture; pass a video file")
     if facts.size is None:

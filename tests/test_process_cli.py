@@ -82,6 +82,22 @@ def test_not_a_video(tmp_path: Path) -> None:
     assert not out.exists()
 
 
+def test_a_recording_cut_off_before_its_index(test_video: Path, tmp_path: Path) -> None:
+    """An MP4 whose index (written last) is missing, as a dashcam leaves it when it loses
+    power: said so, and how it is mended, rather than "not a video"."""
+    from app.sources import ffmpeg_binary
+
+    whole, cut = tmp_path / "whole.mp4", tmp_path / "cut.mp4"
+    subprocess.run(
+        [ffmpeg_binary(), "-loglevel", "error", "-i", str(test_video), "-c", "copy", str(whole)],
+        check=True,
+    )  # the index at the end, as a camera writes it
+    cut.write_bytes(whole.read_bytes()[:300_000])
+    out = tmp_path / "out.mp4"
+    assert_one_line_error(run_cli("process", cut, "-o", out), "moov atom", "untrunc")
+    assert not out.exists()
+
+
 def test_sound_without_a_picture(tmp_path: Path) -> None:
     """An audio file (a dashcam's sound exported alone) is told apart from a damaged video."""
     from app.sources import ffmpeg_binary
