@@ -230,6 +230,7 @@ FRAME_COLUMNS = (
     ("headway_s", "double"),
     ("ttc_s", "double"),
     ("road_grey", "double"),
+    ("grain", "double"),
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -283,6 +284,7 @@ def write_table_parts(
             "headway_s": r.get("headway_s"),
             "ttc_s": r.get("ttc_s"),
             "road_grey": r.get("road_grey"),
+            "grain": r.get("grain"),
         }
         for r in rows
     ]

@@ -90,7 +90,7 @@ def mine_clip(
     for index, frame in enumerate(read_frames(video, info, 0, end)):
         scene = tracker.update(frame)
         if as_seen:
-            frame = detector.seen(frame, scene.road_grey)
+            frame = detector.seen(frame, scene.road_grey, scene.grain)
         if index % every:
             continue
         placed = tracker.placement

@@ -313,7 +313,7 @@ class Pipeline:
                 self._worker.reset_before_next(self._fps)
             elif self.vehicles is not None:
                 self.vehicles.reset(self._fps)
-        scene = self._scene.update(undistorted)
+        scene = self._scene.update(undistorted, frame)
         self._last = (undistorted, scene)
         timings["scene"] = (time.perf_counter() - t0) * 1000
         placement = self._scene.placement
@@ -350,8 +350,13 @@ class Pipeline:
 
     def _for_vehicles(self, placement: dict[str, Any], scene: SceneGeometry) -> dict[str, Any]:
         """The placement the vehicle stage takes: the scene's, with the cars' ground scale and
-        the road's lightness."""
-        return {**placement, "ground_scale": self._car_scale, "road_grey": scene.road_grey}
+        the road's lightness and grain."""
+        return {
+            **placement,
+            "ground_scale": self._car_scale,
+            "road_grey": scene.road_grey,
+            "grain": scene.grain,
+        }
 
     def _finish(self, started: _Started) -> FrameOutput:
         """Add the vehicles (from the worker, or run here) to the frame's result."""

@@ -71,6 +71,7 @@ class KeepLeft:
         overlays: tuple[Box, ...] = (),
         ground_scale: float = 1.0,
         road_grey: float | None = None,
+        grain: float | None = None,
     ) -> VehicleResult:
         """`VehicleDetector.process` of the mirrored frame, mirrored back."""
         width = frame.shape[1]
@@ -83,6 +84,7 @@ class KeepLeft:
             tuple(mirrored_box(box, width) for box in overlays),
             ground_scale,
             road_grey,
+            grain,
         )
         return VehicleResult(
             mirrored_detections(found.detections, width),

@@ -50,18 +50,50 @@ class SceneGeometry:
     # The median grey level (0-255) of the road ahead over the last few seconds; None until
     # measured. Daylight asphalt reads 70-150; at dusk it falls under 40.
     road_grey: float | None = None
+    # The sensor's grain on the road ahead (the noise's standard deviation in grey levels, as
+    # the encoder kept it), the median of the last few seconds; None until measured. The shared
+    # and wild clips read 0-0.35, grainy copies 0.6 and up (see `grain`).
+    grain: float | None = None
 
 
-def road_grey(grey: NDArray[np.uint8], live: Box, horizon_y: float) -> float:
-    """The median grey level of the road ahead in a grey frame: the middle 60 % of the live
-    box's width, from 40 % to 90 % of the way from the horizon down to its bottom (road, not
-    sky, bonnet or verges), every 4th pixel."""
+def road_patch(live: Box, horizon_y: float) -> tuple[slice, slice]:
+    """The road ahead in a frame: the middle 60 % of the live box's width, from 40 % to 90 % of
+    the way from the horizon down to its bottom (road, not sky, bonnet or verges)."""
     x0, y0, x1, y1 = live
     top = max(horizon_y, y0)
     rows = slice(round(top + 0.4 * (y1 - top)), max(round(top + 0.9 * (y1 - top)), y0 + 1))
     columns = slice(round(x0 + 0.2 * (x1 - x0)), max(round(x1 - 0.2 * (x1 - x0)), x0 + 1))
+    return rows, columns
+
+
+def road_grey(grey: NDArray[np.uint8], live: Box, horizon_y: float) -> float:
+    """The median grey level of the road ahead (`road_patch`) in a grey frame, every 4th
+    pixel."""
+    rows, columns = road_patch(live, horizon_y)
     patch = grey[rows, columns][::4, ::4]
     return float(np.median(patch)) if patch.size else 0.0
+
+
+# The second difference whose mean absolute response over pure noise of deviation s is
+# s * 6 / sqrt(pi / 2) (J. Immerkaer, "Fast noise variance estimation", 1996).
+_NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+
+
+def grain(grey: NDArray[np.uint8], live: Box, horizon_y: float, max_width: int = 512) -> float:
+    """The standard deviation, in grey levels, of the noise on the road ahead (`road_patch`,
+    its middle `max_width` columns at most, at full resolution: grain is a pixel's own): the
+    second difference's mean response over the flatter half of the patch (edges, paint and
+    cars left out)."""
+    rows, columns = road_patch(live, horizon_y)
+    extra = max(0, columns.stop - columns.start - max_width)
+    columns = slice(columns.start + extra // 2, columns.stop - (extra - extra // 2))
+    patch = grey[rows, columns].astype(np.float32)
+    if min(patch.shape) < 8:
+        return 0.0
+    response = np.abs(cv2.filter2D(patch, -1, _NOISE_KERNEL))[1:-1, 1:-1]
+    edges = np.abs(cv2.Sobel(patch, cv2.CV_32F, 1, 0)) + np.abs(cv2.Sobel(patch, cv2.CV_32F, 0, 1))
+    flat = edges[1:-1, 1:-1] <= np.median(edges[1:-1, 1:-1])
+    return float(np.sqrt(np.pi / 2) / 6 * response[flat].mean())
 
 
 def monochrome(rgb: NDArray[np.uint8], tolerance: int = 6, max_share: float = 0.005) -> bool:
@@ -327,6 +359,7 @@ class SceneTracker:
         self._placed_x: float | None = None  # the vanishing point's column, placed on its own
         self.light_every = light_every
         self._greys: deque[float] = deque(maxlen=light_window)  # the road's recent grey levels
+        self._grains: deque[float] = deque(maxlen=light_window)  # ... and grain
 
     def _picture(self) -> Box:
         """The box inside the bars."""
@@ -366,8 +399,12 @@ class SceneTracker:
         """The geometry as of the last frame."""
         return self._current
 
-    def update(self, rgb: NDArray[np.uint8]) -> SceneGeometry:
-        """Take in one frame; the geometry as of it."""
+    def update(
+        self, rgb: NDArray[np.uint8], decoded: NDArray[np.uint8] | None = None
+    ) -> SceneGeometry:
+        """Take in one frame; the geometry as of it. Its grain is read off the frame as
+        `decoded`, before undistortion, when given: interpolating pixels smooths grain away
+        unevenly (the shared clips with grain of 0.7 read 0.45 undistorted)."""
         grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         # Bars: sample every 4th row and column (bars are wide; this costs ~1 ms).
         np.maximum(self._row_max, grey[:, ::4].max(axis=1), out=self._row_max)
@@ -397,6 +434,8 @@ class SceneTracker:
                 self._measure(grey, 1.0, live, overlays)
         if self._count % self.light_every == 0:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
+            source = grey if decoded is None else cv2.cvtColor(decoded, cv2.COLOR_RGB2GRAY)
+            self._grains.append(grain(source, live, self._current.horizon_y))
         self._count += 1
         vanishing_x = None
         if self.fixed_horizon is not None:
@@ -418,6 +457,7 @@ class SceneTracker:
             overlays,
             self.ground.value,
             float(np.median(self._greys)) if self._greys else None,
+            float(np.median(self._grains)) if self._grains else None,
         )
         tolerance = self.settle * self.size[1]
         placed_horizon, placed_live, _ = self._placed

@@ -16,6 +16,7 @@ from camera_cal.scene import (
     SceneTracker,
     bonnet_row,
     edge_gain,
+    grain,
     live_box,
     monochrome,
     road_grey,
@@ -344,6 +345,23 @@ def test_the_road_ahead_is_measured_for_its_lightness_not_the_sky_or_bonnet() ->
     frame[330:] = 250
     assert road_grey(frame, (0, 0, 640, 330), 150.0) == 30.0
     assert road_grey(frame, (80, 20, 560, 330), 150.0) == 30.0
+
+
+def test_grain_is_the_noise_on_the_road_not_its_paint_or_edges() -> None:
+    """Noise of deviation 2 on a road with lane lines and a car's dark outline reads 2; the
+    same road without noise reads under 0.1: the lines' and the outline's edges do not count."""
+    rng = np.random.default_rng(3)
+    road = np.full((360, 640), 90.0)
+    road[:150] = 200
+    for x in (200, 330, 460):
+        road[150:, x : x + 8] = 230  # lines across the patch
+    road[220:280, 280:360] = 30  # a dark car body
+    live = (0, 0, 640, 360)
+    clean = grain(road.astype(np.uint8), live, 150.0)
+    noisy = grain(
+        np.clip(road + rng.normal(0, 2, road.shape), 0, 255).astype(np.uint8), live, 150.0
+    )
+    assert clean < 0.1 and noisy == pytest.approx(2.0, rel=0.15), (clean, noisy)
 
 
 def test_the_scene_says_how_light_the_road_is_at_dusk(data_dir: Path) -> None:

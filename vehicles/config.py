@@ -109,6 +109,12 @@ class DetectorConfig:
     # `dark_frames` frames: the encoder renders a dim sensor's grain anew in every frame, while a
     # car ahead stays where it was (the grainy copies' false boxes, README); 1: the frame alone.
     dark_frames: int = 3
+    # ... and so where the road's grain (`camera_cal.scene.grain`) is at least this many grey
+    # levels, in any light: a bright road's grain, as a high-bitrate encoder keeps it, reads as
+    # texture, and windows on empty asphalt and barriers heat (two draws of the shared clips
+    # with grain of 0.6-0.7: 236 and 133 false boxes, 64 and 12 so averaged). The shared and
+    # wild clips read 0.35 at most, copies with half that grain 0.45.
+    grainy: float = 0.5
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
     # fooled the detector, while the detector's windows still place the boxes. On a dark road
@@ -153,6 +159,11 @@ class DetectorConfig:
         or darker (under `dark_road[2]`): the windows read the mean of the last frames and the
         dark verifier checks them."""
         return road_grey is not None and road_grey < self.dark_road[2]
+
+    def averages(self, road_grey: float | None, grain: float | None) -> bool:
+        """Whether the windows read the mean of the last `dark_frames` frames: on a dark road
+        (`is_dark`) or a grainy one (`grainy`)."""
+        return self.is_dark(road_grey) or (grain is not None and grain >= self.grainy)
 
     def min_probability_at(self, road_grey: float | None) -> float:
         """The least P(vehicle) of a hit on a road ahead of this grey level (None: unknown,

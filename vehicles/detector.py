@@ -163,12 +163,15 @@ class VehicleDetector:
         self.heatmap, self.tracker, self.dark_frames = self._fresh_history()
         self.frame_index = 0
 
-    def seen(self, frame: NDArray[np.uint8], road_grey: float | None) -> NDArray[np.uint8]:
+    def seen(
+        self, frame: NDArray[np.uint8], road_grey: float | None, grain: float | None = None
+    ) -> NDArray[np.uint8]:
         """The picture the windows read: on a road at dusk or darker (`road_grey` under
-        `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
-        included; else the frame itself (and the dark frames are forgotten)."""
+        `DetectorConfig.dark_road[2]`) or a grainy one (`grain` from `DetectorConfig.grainy`)
+        the mean of the last `dark_frames` frames, this one included; else the frame itself
+        (and the stored frames are forgotten)."""
         store = self.dark_frames
-        if not self.config.is_dark(road_grey):
+        if not self.config.averages(road_grey, grain):
             store.clear()
             return frame
         if store and store[-1].shape != frame.shape:
@@ -266,14 +269,15 @@ class VehicleDetector:
         overlays: tuple[tuple[int, int, int, int], ...] = (),
         ground_scale: float = 1.0,
         road_grey: float | None = None,
+        grain: float | None = None,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given,
         their windows sized by `ground_scale`, a car's size at a row against the tuned camera's;
         `vanishing_x` does not move them, boxes reach towards it; windows over `overlays`,
         captions or parts of the car, do not heat; on a dark road, by the scene's `road_grey`,
-        the windows read the mean of the last frames (`seen`) and less sure ones heat:
-        `DetectorConfig.min_probability_at`)."""
+        the windows read the mean of the last frames (`seen`; so too on a road of the scene's
+        `grain`) and less sure ones heat: `DetectorConfig.min_probability_at`)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
@@ -281,7 +285,7 @@ class VehicleDetector:
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         dark = cfg.is_dark(road_grey)
-        hits = self.search(self.seen(frame, road_grey), parity, view, dark)
+        hits = self.search(self.seen(frame, road_grey, grain), parity, view, dark)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view, dark)
         strong = proba >= cfg.min_probability_at(road_grey)
