@@ -789,8 +789,8 @@ def test_grainy_daylight_footage_is_read_averaged(data_dir: Path, tmp_path: Path
     CRF 18 keeps it): each frame read alone, windows on the grainy asphalt and barrier heat
     (236 false boxes; a phantom car 6 m ahead in our lane). The scene reads the grain (0.6
     against at most 0.35 on any shared or wild clip) and the windows read the mean of the last
-    3 frames: at most a third of the false boxes, at most a tenth of the cars fewer. Half that
-    grain (0.4) is read as it is: the same boxes as never averaging."""
+    5 frames: at most a fifth of the false boxes (29), at most a tenth of the cars fewer. Half
+    that grain (0.4) is read as it is: the same boxes as never averaging."""
     import subprocess
     from dataclasses import replace
 
@@ -828,7 +828,7 @@ def test_grainy_daylight_footage_is_read_averaged(data_dir: Path, tmp_path: Path
                 grains[strength] += [f["grain"] for f in frames[25:]]
     assert min(grains[4]) >= DetectorConfig().grainy > max(grains[2]), grains
     (tp, fp), (tp_alone, fp_alone) = totals[4, True], totals[4, False]
-    assert fp <= fp_alone / 3 and tp >= 0.9 * tp_alone, totals
+    assert fp <= fp_alone / 5 and tp >= 0.9 * tp_alone, totals
     assert totals[2, True] == totals[2, False], totals
 
 

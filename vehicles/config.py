@@ -112,9 +112,12 @@ class DetectorConfig:
     # ... and so where the road's grain (`camera_cal.scene.grain`) is at least this many grey
     # levels, in any light: a bright road's grain, as a high-bitrate encoder keeps it, reads as
     # texture, and windows on empty asphalt and barriers heat (two draws of the shared clips
-    # with grain of 0.6-0.7: 236 and 133 false boxes, 64 and 12 so averaged). The shared and
-    # wild clips read 0.35 at most, copies with half that grain 0.45.
+    # with grain of 0.6-0.7: 236 and 133 false boxes). The shared and wild clips read 0.35 at
+    # most, copies with half that grain 0.45. There the windows read the mean of the last
+    # `grain_frames` frames (more than on a dark road: the mean of 3 left 64 and 12 false
+    # boxes, of 5 29 and 0, at two cars fewer).
     grainy: float = 0.5
+    grain_frames: int = 5
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
     # fooled the detector, while the detector's windows still place the boxes. On a dark road
@@ -160,10 +163,12 @@ class DetectorConfig:
         dark verifier checks them."""
         return road_grey is not None and road_grey < self.dark_road[2]
 
-    def averages(self, road_grey: float | None, grain: float | None) -> bool:
-        """Whether the windows read the mean of the last `dark_frames` frames: on a dark road
-        (`is_dark`) or a grainy one (`grainy`)."""
-        return self.is_dark(road_grey) or (grain is not None and grain >= self.grainy)
+    def averaged_frames(self, road_grey: float | None, grain: float | None) -> int:
+        """How many of the last frames the windows read the mean of: `dark_frames` on a dark
+        road (`is_dark`), else `grain_frames` on a grainy one (`grainy`), else 1."""
+        if self.is_dark(road_grey):
+            return self.dark_frames
+        return self.grain_frames if grain is not None and grain >= self.grainy else 1
 
     def min_probability_at(self, road_grey: float | None) -> float:
         """The least P(vehicle) of a hit on a road ahead of this grey level (None: unknown,
@@ -190,8 +195,14 @@ class DetectorConfig:
             max_missed=frames(self.track.max_missed),
             show_missed=frames(self.track.show_missed),
         )
-        dark_frames = frames(self.dark_frames)
-        return replace(self, heat=heat, track=track, dark_frames=dark_frames, frame_rate=fps)
+        return replace(
+            self,
+            heat=heat,
+            track=track,
+            dark_frames=frames(self.dark_frames),
+            grain_frames=frames(self.grain_frames),
+            frame_rate=fps,
+        )
 
     def for_still(self) -> DetectorConfig:
         """The same search for a single image: every band, no history to wait for or average."""
@@ -199,6 +210,7 @@ class DetectorConfig:
             self,
             interleave=False,
             dark_frames=1,
+            grain_frames=1,
             heat=replace(self.heat, history=1),
             track=replace(self.track, confirm_frames=1),
         )

@@ -144,40 +144,43 @@ class VehicleDetector:
             self.dark_lowres_scorers = checked_by(self.lowres_scorers, dark_verifier)
         self.keep_debug = keep_debug
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
-        self.heatmap, self.tracker, self.dark_frames = self._fresh_history()
+        self.heatmap, self.tracker, self.recent = self._fresh_history()
         self.frame_index = 0
 
     def _fresh_history(self) -> tuple[Heatmap, Tracker, deque[NDArray[np.uint8]]]:
-        """An empty heat map, tracker and store of dark frames whose frame counts cover the
-        config's time at `fps`."""
+        """An empty heat map, tracker and store of recent frames (read averaged on a dark or
+        grainy road) whose frame counts cover the config's time at `fps`."""
         timed = self.config.at_rate(self.fps)
         # Region boxes come from heat averaged over the recent frames: centred that far back.
         tracker = Tracker(timed.track, lag=(timed.heat.recent - 1) / 2)
-        return Heatmap(timed.heat), tracker, deque(maxlen=timed.dark_frames)
+        store: deque[NDArray[np.uint8]] = deque(maxlen=max(timed.dark_frames, timed.grain_frames))
+        return Heatmap(timed.heat), tracker, store
 
     def reset(self, fps: float | None = None) -> None:
         """Forget heat and tracks; with `fps`, frames now come at that rate (the history keeps
         covering the same time)."""
         if fps is not None:
             self.fps = fps
-        self.heatmap, self.tracker, self.dark_frames = self._fresh_history()
+        self.heatmap, self.tracker, self.recent = self._fresh_history()
         self.frame_index = 0
 
     def seen(
         self, frame: NDArray[np.uint8], road_grey: float | None, grain: float | None = None
     ) -> NDArray[np.uint8]:
         """The picture the windows read: on a road at dusk or darker (`road_grey` under
-        `DetectorConfig.dark_road[2]`) or a grainy one (`grain` from `DetectorConfig.grainy`)
-        the mean of the last `dark_frames` frames, this one included; else the frame itself
-        (and the stored frames are forgotten)."""
-        store = self.dark_frames
-        if not self.config.averages(road_grey, grain):
+        `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
+        included, on a grainy one (`grain` from `DetectorConfig.grainy`) of the last
+        `grain_frames`; else the frame itself (and the stored frames are forgotten)."""
+        count = self.config.at_rate(self.fps).averaged_frames(road_grey, grain)
+        store = self.recent
+        if count <= 1:
             store.clear()
             return frame
         if store and store[-1].shape != frame.shape:
             store.clear()
         store.append(frame.copy())
-        return frame_mean(store) if len(store) > 1 else frame
+        recent = list(store)[-count:]
+        return frame_mean(recent) if len(recent) > 1 else frame
 
     def view(
         self,
