@@ -312,9 +312,6 @@ def probe_video(path: Path) -> VideoInfo:
             f"{path} is truncated or damaged (ffmpeg: {facts.errors[-1]}); "
             "re-export or re-download the video"
         )
-    # Packets can exceed frames (an edit list may drop a few at the start) and the duration
-    # can exceed the video (a longer audio track): the smaller is the estimate. The decoded
-    # count is what the drivers go by.
     video_start_s = max(
         0.0,
         (facts.file_start if facts.video_start is None else facts.video_start) - facts.file_start,
@@ -327,6 +324,9 @@ def probe_video(path: Path) -> VideoInfo:
         facts.fps, frame_times = steady, tuple(float(t) for t in times)
         n_frames = len(steady_sources(times, steady))
     else:
+        # Packets can exceed frames (an edit list may drop a few at the start) and the
+        # duration can exceed the video (a longer audio track): the smaller is the estimate.
+        # The decoded count is what the drivers go by.
         n_frames = round(facts.duration * facts.fps)
         if facts.packets is not None:
             n_frames = min(n_frames, facts.packets) if n_frames > 0 else facts.packets
