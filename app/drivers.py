@@ -173,12 +173,12 @@ def process_video(
         decoded = prefetch(read_frames(source, info, first, last if end_s is not None else None))
         # Colour is looked for in every 5th frame of the first 2 s: a fade from black or a
         # camera starting up shows none at first.
-        grey, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
+        colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
-            if grey and offset <= told_at and offset % 5 == 0:
-                grey = monochrome(out.undistorted)
-            if grey and offset == told_at:
+            if colourless and offset <= told_at and offset % 5 == 0:
+                colourless = monochrome(out.undistorted)
+            if colourless and offset == told_at:
                 log(f"note: {source.name} is {MONOCHROME_NOTE}")
             if video is not None:
                 video.write(compose(out.undistorted, out.result, annotators))
