@@ -79,15 +79,18 @@ def road_grey(grey: NDArray[np.uint8], live: Box, horizon_y: float) -> float:
 _NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 
 
-def grain(grey: NDArray[np.uint8], live: Box, horizon_y: float, max_width: int = 512) -> float:
+def grain(frame: NDArray[np.uint8], live: Box, horizon_y: float, max_width: int = 512) -> float:
     """The standard deviation, in grey levels, of the noise on the road ahead (`road_patch`,
-    its middle `max_width` columns at most, at full resolution: grain is a pixel's own): the
-    second difference's mean response over the flatter half of the patch (edges, paint and
-    cars left out)."""
+    its middle `max_width` columns at most, at full resolution: grain is a pixel's own) of a
+    grey or RGB frame (only the patch is made grey): the second difference's mean response
+    over the flatter half of the patch (edges, paint and cars left out)."""
     rows, columns = road_patch(live, horizon_y)
     extra = max(0, columns.stop - columns.start - max_width)
     columns = slice(columns.start + extra // 2, columns.stop - (extra - extra // 2))
-    patch = grey[rows, columns].astype(np.float32)
+    patch = frame[rows, columns]
+    if patch.ndim == 3:
+        patch = cv2.cvtColor(np.ascontiguousarray(patch), cv2.COLOR_RGB2GRAY)
+    patch = patch.astype(np.float32)
     if min(patch.shape) < 8:
         return 0.0
     response = np.abs(cv2.filter2D(patch, -1, _NOISE_KERNEL))[1:-1, 1:-1]
@@ -434,7 +437,7 @@ class SceneTracker:
                 self._measure(grey, 1.0, live, overlays)
         if self._count % self.light_every == 0:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
-            source = grey if decoded is None else cv2.cvtColor(decoded, cv2.COLOR_RGB2GRAY)
+            source = grey if decoded is None else decoded
             self._grains.append(grain(source, live, self._current.horizon_y))
         self._count += 1
         vanishing_x = None
