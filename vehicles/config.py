@@ -109,14 +109,19 @@ class DetectorConfig:
     # `dark_frames` frames: the encoder renders a dim sensor's grain anew in every frame, while a
     # car ahead stays where it was (the grainy copies' false boxes, README); 1: the frame alone.
     dark_frames: int = 3
-    # ... and so where the road's grain (`camera_cal.scene.grain`) is at least this many grey
-    # levels, in any light: a bright road's grain, as a high-bitrate encoder keeps it, reads as
-    # texture, and windows on empty asphalt and barriers heat (two draws of the shared clips
-    # with grain of 0.6-0.7: 236 and 133 false boxes). The shared and wild clips read 0.35 at
-    # most, copies with half that grain 0.45. There the windows read the mean of the last
-    # `grain_frames` frames (more than on a dark road: the mean of 3 left 64 and 12 false
-    # boxes, of 5 29 and 0, at two cars fewer).
+    # Where the road's grain (`camera_cal.scene.grain`) is at least `grainy` grey levels, in
+    # daylight, the windows read the picture with its colour smoothed (a Gaussian of
+    # `chroma_sigma` px on the chroma channels, the lightness kept): HOG stretches every block
+    # to full strength, and a flat road's chroma, where the sensor's grain is all there is to
+    # stretch, reads as a car's coloured edges (test1.jpg given chroma noise of 2 grey levels:
+    # 1,306 windows sure of a car against 52; lightness noise of 6: 32). The shared and wild
+    # clips read 0.35 at most, copies with half the grain 0.45. From `very_grainy` the windows
+    # also read the mean of the last `grain_frames` frames: copies of the shared clips with
+    # grain of 0.6-0.7 keep more cars without it (166 against 151), those of 1.2 and more keep
+    # false boxes (36 against 3; README).
     grainy: float = 0.5
+    chroma_sigma: float = 2.0
+    very_grainy: float = 1.0
     grain_frames: int = 5
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
     # verges, paint at night), when the verifier's P(vehicle) is at least this: it vetoes what
@@ -165,10 +170,15 @@ class DetectorConfig:
 
     def averaged_frames(self, road_grey: float | None, grain: float | None) -> int:
         """How many of the last frames the windows read the mean of: `dark_frames` on a dark
-        road (`is_dark`), else `grain_frames` on a grainy one (`grainy`), else 1."""
+        road (`is_dark`), else `grain_frames` on a very grainy one (`very_grainy`), else 1."""
         if self.is_dark(road_grey):
             return self.dark_frames
-        return self.grain_frames if grain is not None and grain >= self.grainy else 1
+        return self.grain_frames if grain is not None and grain >= self.very_grainy else 1
+
+    def smooths_chroma(self, road_grey: float | None, grain: float | None) -> bool:
+        """Whether the windows read the picture's colour smoothed: on a grainy road (`grainy`)
+        in daylight (a dark road's verifier learned a dim sensor's grain as it is)."""
+        return not self.is_dark(road_grey) and grain is not None and grain >= self.grainy
 
     def min_probability_at(self, road_grey: float | None) -> float:
         """The least P(vehicle) of a hit on a road ahead of this grey level (None: unknown,

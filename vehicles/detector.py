@@ -6,6 +6,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -100,6 +101,16 @@ def frame_mean(frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
     return ((total + len(frames) // 2) // len(frames)).astype(np.uint8)
 
 
+def chroma_smoothed(frame: NDArray[np.uint8], sigma: float) -> NDArray[np.uint8]:
+    """An RGB frame with its chroma (YCrCb's Cr and Cb) blurred by a Gaussian of `sigma` px and
+    its lightness kept: a sensor's colour grain smoothed away, a car's shape left sharp."""
+    # Channel by channel: blurring a strided view of the channels took twice as long (29 ms
+    # against 13.5 at 720p).
+    lightness, *chroma = cv2.split(cv2.cvtColor(frame, cv2.COLOR_RGB2YCrCb))
+    blurred = [cv2.GaussianBlur(channel, (0, 0), sigma) for channel in chroma]
+    return np.asarray(cv2.cvtColor(cv2.merge([lightness, *blurred]), cv2.COLOR_YCrCb2RGB))
+
+
 def checked_by(scorers: dict[int, Scorer], verifier: VehicleModel) -> dict[int, Scorer]:
     """`scorers` with each one whose model reads `verifier`'s features checked by it instead."""
     reads = (patch for patch, scorer in scorers.items() if scorer.model.config == verifier.config)
@@ -169,9 +180,18 @@ class VehicleDetector:
     ) -> NDArray[np.uint8]:
         """The picture the windows read: on a road at dusk or darker (`road_grey` under
         `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
-        included, on a grainy one (`grain` from `DetectorConfig.grainy`) of the last
-        `grain_frames`; else the frame itself (and the stored frames are forgotten)."""
-        count = self.config.at_rate(self.fps).averaged_frames(road_grey, grain)
+        included, on a very grainy one (`grain` from `DetectorConfig.very_grainy`) of the last
+        `grain_frames`, else the frame itself (and the stored frames are forgotten); on a
+        grainy road in daylight with its colour smoothed (`DetectorConfig.smooths_chroma`)."""
+        config = self.config.at_rate(self.fps)
+        count = config.averaged_frames(road_grey, grain)
+        seen = self._averaged(frame, count)
+        if config.smooths_chroma(road_grey, grain):
+            seen = chroma_smoothed(seen, config.chroma_sigma)
+        return seen
+
+    def _averaged(self, frame: NDArray[np.uint8], count: int) -> NDArray[np.uint8]:
+        """The mean of the last `count` frames, `frame` included (the frame itself for 1)."""
         store = self.recent
         if count <= 1:
             store.clear()
@@ -279,8 +299,9 @@ class VehicleDetector:
         their windows sized by `ground_scale`, a car's size at a row against the tuned camera's;
         `vanishing_x` does not move them, boxes reach towards it; windows over `overlays`,
         captions or parts of the car, do not heat; on a dark road, by the scene's `road_grey`,
-        the windows read the mean of the last frames (`seen`; so too on a road of the scene's
-        `grain`) and less sure ones heat: `DetectorConfig.min_probability_at`)."""
+        the windows read the mean of the last frames and less sure ones heat
+        (`DetectorConfig.min_probability_at`); on a road of the scene's `grain` they read the
+        picture with its colour smoothed, and from more grain averaged too: `seen`)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
