@@ -22,9 +22,11 @@ from vehicles.mining import surest_apart, window_patches
 
 @dataclass(frozen=True)
 class Dimming:
-    """A dim sensor's picture made of footage: ffmpeg's `eq` (`gamma`, `brightness`,
-    `saturation`) and grain of strength `grain` (0-100) drawn anew in every frame from `seed`,
-    at `rows` rows (None: as stored), then encoded as a dashcam would (x264, CRF 23)."""
+    """A dim or cheap sensor's picture made of footage: ffmpeg's `eq` (`gamma`, `brightness`,
+    `saturation`; left out where all three keep the picture) and grain of strength `grain`
+    (0-100) drawn anew in every frame from `seed`, at `rows` rows (None: as stored), then encoded
+    as a dashcam would (x264 at `crf`: 23, x264's default, smooths a daylight grain of 4 away, a
+    dashcam's high bitrate, 18, keeps it)."""
 
     gamma: float
     brightness: float
@@ -32,14 +34,25 @@ class Dimming:
     grain: int
     seed: int
     rows: int | None = None
+    crf: int = 23
 
     def filters(self) -> str:
         """The ffmpeg filter chain."""
         scale = f"scale=-2:{self.rows}," if self.rows is not None else ""
-        return (
-            f"{scale}eq=gamma={self.gamma:g}:brightness={self.brightness:g}:"
-            f"saturation={self.saturation:g},noise=alls={self.grain}:allf=t:all_seed={self.seed}"
+        light = (self.gamma, self.brightness, self.saturation) != (1, 0, 1)
+        eq = (
+            f"eq=gamma={self.gamma:g}:brightness={self.brightness:g}:"
+            f"saturation={self.saturation:g},"
+            if light
+            else ""
         )
+        return f"{scale}{eq}noise=alls={self.grain}:allf=t:all_seed={self.seed}"
+
+
+def grainy(strength: int, seed: int = 7) -> Dimming:
+    """A daylight sensor's grain of `strength` as a high-bitrate dashcam keeps it (CRF 18): the
+    light as it is."""
+    return Dimming(1.0, 0.0, 1.0, grain=strength, seed=seed, crf=18)
 
 
 # The dusk and night copies the dark verifier's hard negatives are mined from: roads of 1-18 grey
@@ -54,11 +67,8 @@ DUSK = (
 def dimmed_copy(video: Path, dimming: Dimming, out: Path) -> Path:
     """`video` as `dimming` makes it, written to `out`."""
     command = [ffmpeg_binary(), "-y", "-loglevel", "error", "-i", str(video)]
-    done = subprocess.run(
-        [*command, "-vf", dimming.filters(), "-an", "-c:v", "libx264", str(out)],
-        capture_output=True,
-        text=True,
-    )
+    command += ["-vf", dimming.filters(), "-an", "-c:v", "libx264", "-crf", str(dimming.crf)]
+    done = subprocess.run([*command, str(out)], capture_output=True, text=True)
     if done.returncode:
         last = (done.stderr.strip().splitlines() or ["no message"])[-1]
         raise InputError(f"cannot make a dimmed copy of {video} ({last}); check the clip")

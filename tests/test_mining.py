@@ -4,13 +4,14 @@ on the rest."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from app.mining import DUSK, Dimming, dimmed_copy
+from app.mining import DUSK, Dimming, dimmed_copy, grainy
 from app.sinks import VideoWriter
 from app.sources import probe_video, read_frames
 from tests.helpers import process_clip, run_cli
@@ -76,6 +77,27 @@ def test_a_dimmed_copy_is_darker_and_grainy_anew_in_every_frame(tmp_path: Path) 
     assert frames.mean() < 90
     assert np.abs(np.diff(frames, axis=0)).mean() > 1.0  # the grain moves
     assert {d.rows for d in DUSK} == {None, 720}  # mined at the clips' size and upscaled
+
+
+def test_a_grainy_copy_keeps_the_light_and_at_a_dashcams_bitrate_its_grain(
+    tmp_path: Path,
+) -> None:
+    """A still grey clip given daylight grain (`grainy`): as light as it was, its filter no
+    `eq`, and at CRF 18 more of the grain kept than at x264's default, 23."""
+    clip = tmp_path / "grey.mp4"
+    writer = VideoWriter(clip, (128, 72), 25.0)
+    for _ in range(4):
+        writer.write(np.full((72, 128, 3), 120, np.uint8))
+    writer.close()
+    copy = grainy(6)
+    assert "eq=" not in copy.filters()
+    spread = {}
+    for crf in (copy.crf, 23):
+        out = dimmed_copy(clip, replace(copy, crf=crf), tmp_path / f"grainy_{crf}.mp4")
+        frames = np.stack(list(read_frames(out, probe_video(out)))).astype(float)
+        assert abs(frames.mean() - 120) < 2
+        spread[crf] = float(frames.std())
+    assert spread[18] > 1.2 * spread[23] > 0, spread
 
 
 def test_mine_dusk_mines_each_dimmed_copy(test_video: Path, tmp_path: Path) -> None:

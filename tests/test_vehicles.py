@@ -823,13 +823,12 @@ def test_grainy_daylight_footage_is_read_with_its_colour_smoothed(
     - grain 4 (twice the noise): smoothed and averaged, at most a twentieth of the false boxes
       and at most 15 % of the cars fewer than on the copy with half the first grain;
     - half the first grain (0.4) is read as it is."""
-    import subprocess
     from dataclasses import replace
 
     from app.assembly import build_stages
     from app.drivers import process_video
+    from app.mining import dimmed_copy, grainy
     from app.record import read_record
-    from app.sources import ffmpeg_binary
 
     calibration = load_calibration(default_calibration_path())
     shipped = DetectorConfig()
@@ -851,21 +850,16 @@ def test_grainy_daylight_footage_is_read_with_its_colour_smoothed(
         source = data_dir / "videos" / f"{clip}.mp4"
         labels = load_labels(data_dir / "labels" / f"{clip}.json")
         for (strength, name), (smoothed_from, averaged_from) in runs.items():
-            grainy = tmp_path / f"{clip}_{strength}.mp4"
-            if not grainy.exists():
-                noise = f"noise=alls={strength}:allf=t:all_seed=7"
-                subprocess.run(
-                    [ffmpeg_binary(), "-y", "-loglevel", "error", "-i", str(source), "-vf",
-                     noise, "-an", "-c:v", "libx264", "-crf", "18", str(grainy)],
-                    check=True,
-                )  # fmt: skip
+            copy = tmp_path / f"{clip}_{strength}.mp4"
+            if not copy.exists():
+                dimmed_copy(source, grainy(strength), copy)
             _, detector = build_stages(lanes=False)
             assert detector is not None
             detector.config = replace(
                 detector.config, grainy=smoothed_from, very_grainy=averaged_from
             )
             record = tmp_path / f"{clip}_{strength}_{name}.jsonl"
-            process_video(grainy, None, calibration, None, detector, record=record)
+            process_video(copy, None, calibration, None, detector, record=record)
             frames = list(read_record(record))
             scores = evaluate(labels, frames)["vehicles"]["iou_0.5"]
             totals[strength, name][0] += scores["true_positives"]
@@ -888,23 +882,21 @@ def test_grainy_dark_footage_keeps_its_precision(data_dir: Path, tmp_path: Path)
     each frame alone, and no car fewer; checked on the dark road by the dark verifier, which
     learned other dimmed copies of other clips, at most half the false boxes of the verifier
     alone, and at most 3 % of the cars fewer."""
-    import subprocess
     from dataclasses import replace
 
     from app.assembly import build_stages
     from app.drivers import process_video
+    from app.mining import Dimming, dimmed_copy
     from app.record import read_record
-    from app.sources import ffmpeg_binary
 
-    dim = "eq=gamma=0.55:brightness=-0.08:saturation=0.7,noise=alls=6:allf=t:all_seed=7"
+    dim = Dimming(0.55, -0.08, 0.7, grain=6, seed=7)
     calibration = load_calibration(default_calibration_path())
     # (frames read, the dark verifier): true and false positives
     totals = {(3, True): [0, 0], (1, True): [0, 0], (3, False): [0, 0]}
     for clip in ("test_video", "project_cut_1", "project_cut_2"):
         grainy = tmp_path / f"{clip}.mp4"
         source = data_dir / "videos" / f"{clip}.mp4"
-        command = [ffmpeg_binary(), "-y", "-loglevel", "error", "-i", str(source), "-vf", dim]
-        subprocess.run([*command, "-an", str(grainy)], check=True)
+        dimmed_copy(source, dim, grainy)
         labels = load_labels(data_dir / "labels" / f"{clip}.json")
         for (frames, dark), counts in totals.items():
             # A verifier given by name checks every road, the dark one too.
