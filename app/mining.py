@@ -49,10 +49,11 @@ class Dimming:
         return f"{scale}{eq}noise=alls={self.grain}:allf=t:all_seed={self.seed}"
 
 
-def grainy(strength: int, seed: int = 7) -> Dimming:
-    """A daylight sensor's grain of `strength` as a high-bitrate dashcam keeps it (CRF 18): the
-    light as it is."""
-    return Dimming(1.0, 0.0, 1.0, grain=strength, seed=seed, crf=18)
+def grainy(strength: int, seed: int = 7, dusk: bool = False) -> Dimming:
+    """A sensor's grain of `strength` as a high-bitrate dashcam keeps it (CRF 18): in the light
+    as it is, or at `dusk` (the shared clips' asphalt at about 30 grey levels)."""
+    light = (0.75, -0.05, 0.85) if dusk else (1.0, 0.0, 1.0)
+    return Dimming(*light, grain=strength, seed=seed, crf=18)
 
 
 # The dusk and night copies the dark verifier's hard negatives are mined from: roads of 1-18 grey

@@ -182,11 +182,11 @@ class VehicleDetector:
         `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
         included, on a very grainy one (`grain` from `DetectorConfig.very_grainy`) of the last
         `grain_frames`, else the frame itself (and the stored frames are forgotten); on a
-        grainy road in daylight with its colour smoothed (`DetectorConfig.smooths_chroma`)."""
+        grainy road, in any light, with its colour smoothed (`DetectorConfig.smooths_chroma`)."""
         config = self.config.at_rate(self.fps)
         count = config.averaged_frames(road_grey, grain)
         seen = self._averaged(frame, count)
-        if config.smooths_chroma(road_grey, grain):
+        if config.smooths_chroma(grain):
             seen = chroma_smoothed(seen, config.chroma_sigma)
         return seen
 
