@@ -61,7 +61,8 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     """The scene geometry on the frame: the live box (green; its bottom is labelled when a
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
     --horizon) with the ground scale once it moved from 1, the road's vanishing point on it (a
-    circle, once estimated) and the boxes of burnt-in captions (red)."""
+    circle, once estimated), the boxes of burnt-in captions (red), and the road's grey level
+    and grain once measured."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -79,6 +80,9 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
         cv2.putText(
             picture, "caption", (cx0, cy0 - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 40, 40), 1
         )
+    if scene.road_grey is not None and scene.grain is not None:
+        light = f"road grey {scene.road_grey:.0f}, grain {scene.grain:.2f}"
+        cv2.putText(picture, light, (x0 + 10, y0 + 30), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.bonnet_y is not None:
         cv2.putText(
             picture, "bonnet", (x0 + 10, y1 + 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 255, 0), 2
@@ -102,7 +106,20 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
     vehicles = out.result.vehicles
     if vehicles is not None and vehicles.debug is not None:
         d = vehicles.debug
-        hits = out.undistorted.copy()
+        # Drawn on the picture the windows read (the mean of frames, the colour smoothed).
+        hits = (out.undistorted if d.seen is None else d.seen).copy()
+        read = [f"the mean of {d.averaged} frames"] if d.averaged > 1 else []
+        read += ["colour smoothed (grain)"] if d.smoothed else []
+        if read:
+            cv2.putText(
+                hits,
+                "windows read " + ", ".join(read),
+                (10, hits.shape[0] - 14),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.7,
+                (255, 255, 255),
+                2,
+            )
         for k, band_hits in enumerate(d.hits):
             color = SCALE_COLORS[k % len(SCALE_COLORS)]
             strong = band_hits.decisions > 0

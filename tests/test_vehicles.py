@@ -809,6 +809,28 @@ def test_on_a_grainy_road_the_windows_read_the_colour_smoothed(model: VehicleMod
         np.testing.assert_array_equal(detector.seen(frame, road_grey, config.grainy - 0.1), frame)
 
 
+def test_debug_shows_the_picture_the_windows_read(model: VehicleModel) -> None:
+    """With debug kept, a grainy frame's intermediates hold the picture the windows read (its
+    colour smoothed) and the debug mode draws the window hits on it; a clean frame's hold none,
+    and the hits are drawn on the frame itself."""
+    from app.debug import intermediates
+    from app.pipeline import FrameOutput, FrameResult
+
+    rng = np.random.default_rng(9)
+    frame = rng.integers(60, 200, (72, 128, 3), dtype=np.uint8)
+    for grain, smoothed in ((None, False), (DetectorConfig().grainy, True)):
+        detector = VehicleDetector(model, keep_debug=True)
+        result = detector.process(frame, grain=grain)
+        assert result.debug is not None and result.debug.smoothed is smoothed
+        assert (result.debug.seen is not None) is smoothed
+        out = FrameOutput(frame, FrameResult(vehicles=result))
+        hits = intermediates(out, frame)["window_hits"]
+        read = frame if result.debug.seen is None else result.debug.seen
+        corner = (slice(0, 8), slice(-8, None))  # no window reaches the sky's corner
+        np.testing.assert_array_equal(hits[corner], read[corner])
+        assert bool((read[corner] != frame[corner]).any()) is smoothed
+
+
 @pytest.mark.slow
 def test_grainy_daylight_footage_is_read_with_its_colour_smoothed(
     data_dir: Path, tmp_path: Path

@@ -29,6 +29,11 @@ class VehicleDebug:
     regions: Detections
     heat_threshold: float
     vetoed: NDArray[np.float64]  # (n, 4) windows the model was sure of and the verifier was not
+    # The picture the windows read, where it is not the frame itself (`VehicleDetector.seen`):
+    # the mean of this many of the last frames, and with its colour smoothed or not.
+    seen: NDArray[np.uint8] | None = None
+    averaged: int = 1
+    smoothed: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,7 +314,8 @@ class VehicleDetector:
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         dark = cfg.is_dark(road_grey)
-        hits = self.search(self.seen(frame, road_grey, grain), parity, view, dark)
+        seen = self.seen(frame, road_grey, grain)
+        hits = self.search(seen, parity, view, dark)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view, dark)
         strong = proba >= cfg.min_probability_at(road_grey)
@@ -359,11 +365,18 @@ class VehicleDetector:
             tolerance=cfg.heat.scale,
         )
         shown = Detections(reached, shown.scores, shown.ids)
-        debug = (
-            VehicleDebug(
-                hits, frame_heat, self.heatmap.combined, regions, cfg.heat.threshold, vetoed
+        debug = None
+        if self.keep_debug:
+            timed = cfg.at_rate(self.fps)
+            debug = VehicleDebug(
+                hits,
+                frame_heat,
+                self.heatmap.combined,
+                regions,
+                cfg.heat.threshold,
+                vetoed,
+                None if seen is frame else seen,
+                min(timed.averaged_frames(road_grey, grain), len(self.recent) or 1),
+                timed.smooths_chroma(grain),
             )
-            if self.keep_debug
-            else None
-        )
         return VehicleResult(shown, debug)
