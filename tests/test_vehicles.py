@@ -784,9 +784,10 @@ def test_on_a_dark_road_the_windows_read_the_mean_of_the_last_frames(model: Vehi
 
 
 def test_on_a_grainy_road_the_windows_read_the_colour_smoothed(model: VehicleModel) -> None:
-    """A grey road with a white square, given colour grain: from `grainy`, in daylight or on a
-    dark road, the windows see its chroma's grain mostly gone and its lightness, the square's
-    edges included, as it was; under `grainy` the frame as is."""
+    """A grey road with a white square, given colour grain, in a picture of 720 rows: from
+    `grainy`, in daylight or on a dark road, the windows see its chroma's grain mostly gone and
+    its lightness, the square's edges included, as it was; in a picture of 360 rows less
+    smoothed (in proportion); under `grainy` the frame as is."""
     rng = np.random.default_rng(5)
     ycc = np.full((64, 96, 3), (110, 128, 128), np.float64)
     ycc[20:40, 30:60, 0] = 230
@@ -802,11 +803,14 @@ def test_on_a_grainy_road_the_windows_read_the_colour_smoothed(model: VehicleMod
     config = DetectorConfig()
     for road_grey in (120.0, 30.0):  # the first frame on a dark road: no mean of frames yet
         detector = VehicleDetector(model)
-        seen = detector.seen(frame, road_grey, config.grainy)
+        seen = detector.seen(frame, road_grey, config.grainy, 720.0)
         assert chroma_spread(seen) < chroma_spread(frame) / 3
         assert np.abs(ycc_of(seen)[..., 0] - ycc_of(frame)[..., 0]).max() <= 2
+        smaller = VehicleDetector(model).seen(frame, road_grey, config.grainy, 360.0)
+        assert chroma_spread(seen) < chroma_spread(smaller) < chroma_spread(frame)
         detector = VehicleDetector(model)
-        np.testing.assert_array_equal(detector.seen(frame, road_grey, config.grainy - 0.1), frame)
+        grain = config.grainy - 0.1
+        np.testing.assert_array_equal(detector.seen(frame, road_grey, grain, 720.0), frame)
 
 
 def test_debug_shows_the_picture_the_windows_read(model: VehicleModel) -> None:

@@ -110,10 +110,11 @@ class DetectorConfig:
     # car ahead stays where it was (the grainy copies' false boxes, README); 1: the frame alone.
     dark_frames: int = 3
     # Where the road's grain (`camera_cal.scene.grain`) is at least `grainy` grey levels, in
-    # any light, the windows read the picture with its colour smoothed (a Gaussian of
-    # `chroma_sigma` px on the chroma channels, the lightness kept): HOG stretches every block
-    # to full strength, and a flat road's chroma, where the sensor's grain is all there is to
-    # stretch, reads as a car's coloured edges (test1.jpg given chroma noise of 2 grey levels:
+    # any light, the windows read the picture with its colour smoothed (a Gaussian on the
+    # chroma channels, the lightness kept, of `chroma_sigma` of the scale height: 2 px at 720
+    # rows; 2 px at 360 rows cost cars, at 1080 left false boxes; README): HOG stretches every
+    # block to full strength, and a flat road's chroma, where the sensor's grain is all there is
+    # to stretch, reads as a car's coloured edges (test1.jpg given chroma noise of 2 grey levels:
     # 1,306 windows sure of a car against 52; lightness noise of 6: 32). The shared and wild
     # clips read 0.35 at most, copies with half the grain 0.45. From `very_grainy` the windows
     # also read the mean of the last `grain_frames` frames: copies of the shared clips with
@@ -121,7 +122,7 @@ class DetectorConfig:
     # false boxes (36 against 3; README). At dusk too: copies dimmed with grain of 2 kept 446
     # false boxes without the smoothing, none with it (README).
     grainy: float = 0.5
-    chroma_sigma: float = 2.0
+    chroma_sigma: float = 2.0 / 720
     very_grainy: float = 1.0
     grain_frames: int = 5
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,

@@ -181,18 +181,24 @@ class VehicleDetector:
         self.frame_index = 0
 
     def seen(
-        self, frame: NDArray[np.uint8], road_grey: float | None, grain: float | None = None
+        self,
+        frame: NDArray[np.uint8],
+        road_grey: float | None,
+        grain: float | None = None,
+        scale_height: float | None = None,
     ) -> NDArray[np.uint8]:
         """The picture the windows read: on a road at dusk or darker (`road_grey` under
         `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
         included, on a very grainy one (`grain` from `DetectorConfig.very_grainy`) of the last
         `grain_frames`, else the frame itself (and the stored frames are forgotten); on a
-        grainy road, in any light, with its colour smoothed (`DetectorConfig.smooths_chroma`)."""
+        grainy road, in any light, with its colour smoothed (`DetectorConfig.smooths_chroma`) in
+        proportion to `scale_height` (`View.scale_height`; None: the frame's height)."""
         config = self.config.at_rate(self.fps)
         count = config.averaged_frames(road_grey, grain)
         seen = self._averaged(frame, count)
         if config.smooths_chroma(grain):
-            seen = chroma_smoothed(seen, config.chroma_sigma)
+            rows = frame.shape[0] if scale_height is None else scale_height
+            seen = chroma_smoothed(seen, config.chroma_sigma * rows)
         return seen
 
     def _averaged(self, frame: NDArray[np.uint8], count: int) -> NDArray[np.uint8]:
@@ -314,7 +320,7 @@ class VehicleDetector:
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         dark = cfg.is_dark(road_grey)
-        seen = self.seen(frame, road_grey, grain)
+        seen = self.seen(frame, road_grey, grain, view.scale_height)
         hits = self.search(seen, parity, view, dark)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view, dark)
