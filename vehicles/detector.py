@@ -193,25 +193,37 @@ class VehicleDetector:
         `grain_frames`, else the frame itself (and the stored frames are forgotten); on a
         grainy road, in any light, with its colour smoothed (`DetectorConfig.smooths_chroma`) in
         proportion to `scale_height` (`View.scale_height`; None: the frame's height)."""
-        config = self.config.at_rate(self.fps)
-        count = config.averaged_frames(road_grey, grain)
-        seen = self._averaged(frame, count)
-        if config.smooths_chroma(grain):
-            rows = frame.shape[0] if scale_height is None else scale_height
-            seen = chroma_smoothed(seen, config.chroma_sigma * rows)
-        return seen
+        return self._read(frame, road_grey, grain, scale_height)[0]
 
-    def _averaged(self, frame: NDArray[np.uint8], count: int) -> NDArray[np.uint8]:
-        """The mean of the last `count` frames, `frame` included (the frame itself for 1)."""
+    def _read(
+        self,
+        frame: NDArray[np.uint8],
+        road_grey: float | None,
+        grain: float | None,
+        scale_height: float | None,
+    ) -> tuple[NDArray[np.uint8], int, bool]:
+        """`seen`'s picture, how many frames it is the mean of, and whether its colour was
+        smoothed (for the debug mode)."""
+        config = self.config.at_rate(self.fps)
+        picture, averaged = self._averaged(frame, config.averaged_frames(road_grey, grain))
+        smoothed = config.smooths_chroma(grain)
+        if smoothed:
+            rows = frame.shape[0] if scale_height is None else scale_height
+            picture = chroma_smoothed(picture, config.chroma_sigma * rows)
+        return picture, averaged, smoothed
+
+    def _averaged(self, frame: NDArray[np.uint8], count: int) -> tuple[NDArray[np.uint8], int]:
+        """The mean of the last `count` frames, `frame` included (the frame itself for 1), and
+        how many frames it is the mean of (fewer than `count` while they are stored)."""
         store = self.recent
         if count <= 1:
             store.clear()
-            return frame
+            return frame, 1
         if store and store[-1].shape != frame.shape:
             store.clear()
         store.append(frame.copy())
         recent = list(store)[-count:]
-        return frame_mean(recent) if len(recent) > 1 else frame
+        return (frame_mean(recent) if len(recent) > 1 else frame), len(recent)
 
     def view(
         self,
@@ -320,7 +332,7 @@ class VehicleDetector:
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         dark = cfg.is_dark(road_grey)
-        seen = self.seen(frame, road_grey, grain, view.scale_height)
+        seen, averaged, smoothed = self._read(frame, road_grey, grain, view.scale_height)
         hits = self.search(seen, parity, view, dark)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view, dark)
@@ -371,10 +383,8 @@ class VehicleDetector:
             tolerance=cfg.heat.scale,
         )
         shown = Detections(reached, shown.scores, shown.ids)
-        debug = None
-        if self.keep_debug:
-            timed = cfg.at_rate(self.fps)
-            debug = VehicleDebug(
+        debug = (
+            VehicleDebug(
                 hits,
                 frame_heat,
                 self.heatmap.combined,
@@ -382,7 +392,10 @@ class VehicleDetector:
                 cfg.heat.threshold,
                 vetoed,
                 None if seen is frame else seen,
-                min(timed.averaged_frames(road_grey, grain), len(self.recent) or 1),
-                timed.smooths_chroma(grain),
+                averaged,
+                smoothed,
             )
+            if self.keep_debug
+            else None
+        )
         return VehicleResult(shown, debug)
