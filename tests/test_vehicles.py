@@ -835,6 +835,31 @@ def test_debug_shows_the_picture_the_windows_read(model: VehicleModel) -> None:
         assert bool((read[corner] != frame[corner]).any()) is smoothed
 
 
+def _boxes_on(
+    copy: Path,
+    labels: dict[int, FrameLabels],
+    record: Path,
+    verifier: Path | None = None,
+    **changes: Any,
+) -> tuple[int, int, list[dict[str, Any]]]:
+    """True and false boxes at IoU 0.5 of the shipped vehicle stage (calibrated; `verifier`
+    given by name, `changes` to its config) on a copy of a clip, and the record's frames."""
+    from dataclasses import replace
+
+    from app.assembly import build_stages
+    from app.drivers import process_video
+    from app.record import read_record
+
+    _, detector = build_stages(lanes=False, verifier=verifier)
+    assert detector is not None
+    detector.config = replace(detector.config, **changes)
+    calibration = load_calibration(default_calibration_path())
+    process_video(copy, None, calibration, None, detector, record=record)
+    frames = list(read_record(record))
+    scores = evaluate(labels, frames)["vehicles"]["iou_0.5"]
+    return scores["true_positives"], scores["false_positives"], frames
+
+
 @pytest.mark.slow
 def test_grainy_daylight_footage_is_read_with_its_colour_smoothed(
     data_dir: Path, tmp_path: Path
@@ -848,14 +873,8 @@ def test_grainy_daylight_footage_is_read_with_its_colour_smoothed(
     - grain 4 (twice the noise): smoothed and averaged, at most a twentieth of the false boxes
       and at most 15 % of the cars fewer than on the copy with half the first grain;
     - half the first grain (0.4) is read as it is."""
-    from dataclasses import replace
-
-    from app.assembly import build_stages
-    from app.drivers import process_video
     from app.mining import dimmed_copy, grainy
-    from app.record import read_record
 
-    calibration = load_calibration(default_calibration_path())
     shipped = DetectorConfig()
     # (grainy, very_grainy): read as is, or only averaged (from `grainy`), or as shipped
     alone = (float("inf"), float("inf"))
@@ -878,17 +897,12 @@ def test_grainy_daylight_footage_is_read_with_its_colour_smoothed(
             copy = tmp_path / f"{clip}_{strength}.mp4"
             if not copy.exists():
                 dimmed_copy(source, grainy(strength), copy)
-            _, detector = build_stages(lanes=False)
-            assert detector is not None
-            detector.config = replace(
-                detector.config, grainy=smoothed_from, very_grainy=averaged_from
-            )
             record = tmp_path / f"{clip}_{strength}_{name}.jsonl"
-            process_video(copy, None, calibration, None, detector, record=record)
-            frames = list(read_record(record))
-            scores = evaluate(labels, frames)["vehicles"]["iou_0.5"]
-            totals[strength, name][0] += scores["true_positives"]
-            totals[strength, name][1] += scores["false_positives"]
+            tp, fp, frames = _boxes_on(
+                copy, labels, record, grainy=smoothed_from, very_grainy=averaged_from
+            )
+            totals[strength, name][0] += tp
+            totals[strength, name][1] += fp
             if name == "shipped":
                 grains[strength] += [f["grain"] for f in frames[25:]]
     assert min(grains[4]) >= shipped.grainy > max(grains[2]), grains
@@ -908,15 +922,9 @@ def test_grainy_dusk_footage_at_a_dashcams_bitrate_is_read_with_its_colour_smoot
     a dashcam's bitrate (CRF 18): the grain reads 2, and on the dark road, too, the windows read
     the picture with its colour smoothed: at most a twentieth of the false boxes of the mean of
     frames alone (446 of them), and more cars."""
-    from dataclasses import replace
-
-    from app.assembly import build_stages
-    from app.drivers import process_video
     from app.mining import dimmed_copy, grainy
-    from app.record import read_record
 
     dusk = grainy(6, dusk=True)
-    calibration = load_calibration(default_calibration_path())
     shipped = DetectorConfig()
     totals = {True: [0, 0], False: [0, 0]}  # smoothed: true and false positives
     dark: list[bool] = []  # whether each frame's road was dark (project_cut_2's concrete: not)
@@ -924,18 +932,13 @@ def test_grainy_dusk_footage_at_a_dashcams_bitrate_is_read_with_its_colour_smoot
         copy = dimmed_copy(data_dir / "videos" / f"{clip}.mp4", dusk, tmp_path / f"{clip}.mp4")
         labels = load_labels(data_dir / "labels" / f"{clip}.json")
         for smoothed, counts in totals.items():
-            _, detector = build_stages(lanes=False)
-            assert detector is not None
-            if not smoothed:
-                detector.config = replace(detector.config, grainy=float("inf"))
             record = tmp_path / f"{clip}_{smoothed}.jsonl"
-            process_video(copy, None, calibration, None, detector, record=record)
-            frames = list(read_record(record))
+            smoothed_from = shipped.grainy if smoothed else float("inf")
+            tp, fp, frames = _boxes_on(copy, labels, record, grainy=smoothed_from)
             dark += [f["road_grey"] < shipped.dark_road[2] for f in frames if f["road_grey"]]
             assert frames[-1]["grain"] >= shipped.very_grainy
-            scores = evaluate(labels, frames)["vehicles"]["iou_0.5"]
-            counts[0] += scores["true_positives"]
-            counts[1] += scores["false_positives"]
+            counts[0] += tp
+            counts[1] += fp
     assert np.mean(dark) > 0.6
     (tp, fp), (tp_alone, fp_alone) = totals[True], totals[False]
     assert fp <= fp_alone / 20 and tp > tp_alone, totals
@@ -948,33 +951,21 @@ def test_grainy_dark_footage_keeps_its_precision(data_dir: Path, tmp_path: Path)
     each frame alone, and no car fewer; checked on the dark road by the dark verifier, which
     learned other dimmed copies of other clips, at most half the false boxes of the verifier
     alone, and at most 3 % of the cars fewer."""
-    from dataclasses import replace
-
-    from app.assembly import build_stages
-    from app.drivers import process_video
     from app.mining import Dimming, dimmed_copy
-    from app.record import read_record
 
     dim = Dimming(0.55, -0.08, 0.7, grain=6, seed=7)
-    calibration = load_calibration(default_calibration_path())
     # (frames read, the dark verifier): true and false positives
     totals = {(3, True): [0, 0], (1, True): [0, 0], (3, False): [0, 0]}
     for clip in ("test_video", "project_cut_1", "project_cut_2"):
-        grainy = tmp_path / f"{clip}.mp4"
-        source = data_dir / "videos" / f"{clip}.mp4"
-        dimmed_copy(source, dim, grainy)
+        grainy = dimmed_copy(data_dir / "videos" / f"{clip}.mp4", dim, tmp_path / f"{clip}.mp4")
         labels = load_labels(data_dir / "labels" / f"{clip}.json")
         for (frames, dark), counts in totals.items():
             # A verifier given by name checks every road, the dark one too.
             checker = None if dark else default_verifier_path()
-            _, detector = build_stages(lanes=False, verifier=checker)
-            assert detector is not None
-            detector.config = replace(detector.config, dark_frames=frames)
             record = tmp_path / f"{clip}_{frames}_{dark}.jsonl"
-            process_video(grainy, None, calibration, None, detector, record=record)
-            scores = evaluate(labels, list(read_record(record)))["vehicles"]["iou_0.5"]
-            counts[0] += scores["true_positives"]
-            counts[1] += scores["false_positives"]
+            tp, fp, _ = _boxes_on(grainy, labels, record, checker, dark_frames=frames)
+            counts[0] += tp
+            counts[1] += fp
     (tp, fp), (tp_alone, fp_alone) = totals[3, True], totals[1, True]
     assert tp >= tp_alone and fp <= fp_alone / 2, totals
     tp_plain, fp_plain = totals[3, False]
