@@ -120,9 +120,13 @@ class DetectorConfig:
     # also read the mean of the last `grain_frames` frames: copies of the shared clips with
     # grain of 0.6-0.7 keep more cars without it (166 against 151), those of 1.2 and more keep
     # false boxes (36 against 3; README). At dusk too: copies dimmed with grain of 2 kept 446
-    # false boxes without the smoothing, none with it (README).
+    # false boxes without the smoothing, none with it (README). From `chroma_grain` the
+    # Gaussian widens by the square root of the grain over it: copies with grain 5.7, 7.2 and
+    # 9.8 kept 30, 123 and 274 false boxes at 2 px, 0, 0 and 4 so (in proportion to the grain,
+    # 3.6 px at 7.2, cars were lost: 147 against 159; README).
     grainy: float = 0.5
     chroma_sigma: float = 2.0 / 720
+    chroma_grain: float = 4.0
     very_grainy: float = 1.0
     grain_frames: int = 5
     # ... and, with a verifier (a model that also learned hard negatives: dark road, wet road,
@@ -177,10 +181,14 @@ class DetectorConfig:
             return self.dark_frames
         return self.grain_frames if grain is not None and grain >= self.very_grainy else 1
 
-    def smooths_chroma(self, grain: float | None) -> bool:
-        """Whether the windows read the picture's colour smoothed: on a grainy road (`grainy`),
-        at any light."""
-        return grain is not None and grain >= self.grainy
+    def chroma_sigma_at(self, grain: float | None, rows: float) -> float | None:
+        """The Gaussian (px) that smooths the picture's colour on a road of this `grain` (from
+        `grainy`, at any light; None under it or unknown: the colour is read as it is), in a
+        picture of `rows` scale height: `chroma_sigma` of the rows, widened by the square root
+        of the grain over `chroma_grain` beyond it."""
+        if grain is None or grain < self.grainy:
+            return None
+        return float(self.chroma_sigma * rows * np.sqrt(max(1.0, grain / self.chroma_grain)))
 
     def min_probability_at(self, road_grey: float | None) -> float:
         """The least P(vehicle) of a hit on a road ahead of this grey level (None: unknown,

@@ -191,7 +191,7 @@ class VehicleDetector:
         `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
         included, on a very grainy one (`grain` from `DetectorConfig.very_grainy`) of the last
         `grain_frames`, else the frame itself (and the stored frames are forgotten); on a
-        grainy road, in any light, with its colour smoothed (`DetectorConfig.smooths_chroma`) in
+        grainy road, in any light, with its colour smoothed (`DetectorConfig.chroma_sigma_at`) in
         proportion to `scale_height` (`View.scale_height`; None: the frame's height)."""
         return self._read(frame, road_grey, grain, scale_height)[0]
 
@@ -206,11 +206,11 @@ class VehicleDetector:
         smoothed (for the debug mode)."""
         config = self.config.at_rate(self.fps)
         picture, averaged = self._averaged(frame, config.averaged_frames(road_grey, grain))
-        smoothed = config.smooths_chroma(grain)
-        if smoothed:
-            rows = frame.shape[0] if scale_height is None else scale_height
-            picture = chroma_smoothed(picture, config.chroma_sigma * rows)
-        return picture, averaged, smoothed
+        height = frame.shape[0] if scale_height is None else scale_height
+        sigma = config.chroma_sigma_at(grain, height)
+        if sigma is not None:
+            picture = chroma_smoothed(picture, sigma)
+        return picture, averaged, sigma is not None
 
     def _averaged(self, frame: NDArray[np.uint8], count: int) -> tuple[NDArray[np.uint8], int]:
         """The mean of the last `count` frames, `frame` included (the frame itself for 1), and
