@@ -15,7 +15,7 @@ from vehicles.detections import Detections, covered_share, smaller_sides
 from vehicles.heatmap import Heatmap
 from vehicles.model import ModelError, VehicleModel
 from vehicles.refine import reach_toward, snap_bottoms, snap_tops
-from vehicles.search import BandHits, LinearWeights, View, search_band
+from vehicles.search import BandHits, LinearWeights, View, band_geometry, search_band
 from vehicles.tracker import Tracker
 
 
@@ -106,14 +106,28 @@ def frame_mean(frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
     return ((total + len(frames) // 2) // len(frames)).astype(np.uint8)
 
 
-def chroma_smoothed(frame: NDArray[np.uint8], sigma: float) -> NDArray[np.uint8]:
+def chroma_smoothed(
+    frame: NDArray[np.uint8], sigma: float, rows: tuple[int, int] | None = None
+) -> NDArray[np.uint8]:
     """An RGB frame with its chroma (YCrCb's Cr and Cb) blurred by a Gaussian of `sigma` px and
-    its lightness kept: a sensor's colour grain smoothed away, a car's shape left sharp."""
+    its lightness kept: a sensor's colour grain smoothed away, a car's shape left sharp. Only
+    `rows` (top, bottom; None: all) are smoothed, as the whole frame would smooth them, and the
+    others are kept as they are: the windows read the rows of their bands alone."""
+    top, bottom = (0, frame.shape[0]) if rows is None else rows
+    # Read a margin around the rows, as far as the Gaussian reaches (OpenCV's kernel: 3 sigma
+    # each side for 8-bit pictures, 4 taken), so that they blur as within the whole frame.
+    reach = int(np.ceil(4 * sigma)) + 1
+    start, stop = max(0, top - reach), min(frame.shape[0], bottom + reach)
     # Channel by channel: blurring a strided view of the channels took twice as long (29 ms
     # against 13.5 at 720p).
-    lightness, *chroma = cv2.split(cv2.cvtColor(frame, cv2.COLOR_RGB2YCrCb))
+    lightness, *chroma = cv2.split(cv2.cvtColor(frame[start:stop], cv2.COLOR_RGB2YCrCb))
     blurred = [cv2.GaussianBlur(channel, (0, 0), sigma) for channel in chroma]
-    return np.asarray(cv2.cvtColor(cv2.merge([lightness, *blurred]), cv2.COLOR_YCrCb2RGB))
+    smoothed = cv2.cvtColor(cv2.merge([lightness, *blurred]), cv2.COLOR_YCrCb2RGB)
+    if (top, bottom) == (0, frame.shape[0]):
+        return np.asarray(smoothed)
+    picture = frame.copy()
+    picture[top:bottom] = smoothed[top - start : bottom - start]
+    return picture
 
 
 def checked_by(scorers: dict[int, Scorer], verifier: VehicleModel) -> dict[int, Scorer]:
@@ -201,15 +215,16 @@ class VehicleDetector:
         road_grey: float | None,
         grain: float | None,
         scale_height: float | None,
+        rows: tuple[int, int] | None = None,
     ) -> tuple[NDArray[np.uint8], int, bool]:
-        """`seen`'s picture, how many frames it is the mean of, and whether its colour was
-        smoothed (for the debug mode)."""
+        """`seen`'s picture (its colour smoothed over `rows` alone when given), how many frames
+        it is the mean of, and whether its colour was smoothed (for the debug mode)."""
         config = self.config.at_rate(self.fps)
         picture, averaged = self._averaged(frame, config.averaged_frames(road_grey, grain))
         height = frame.shape[0] if scale_height is None else scale_height
         sigma = config.chroma_sigma_at(grain, height)
         if sigma is not None:
-            picture = chroma_smoothed(picture, sigma)
+            picture = chroma_smoothed(picture, sigma, rows)
         return picture, averaged, sigma is not None
 
     def _averaged(self, frame: NDArray[np.uint8], count: int) -> tuple[NDArray[np.uint8], int]:
@@ -246,6 +261,14 @@ class VehicleDetector:
             float(box[3] - box[1]) if scale_height is None else scale_height,
             ground_scale,
         )
+
+    def band_rows(self, view: View) -> tuple[int, int]:
+        """The rows (top, bottom) the bands span in frames seen as `view`, every band's."""
+        spans = [
+            band_geometry(band, view, band.patch, self.config.reference_horizon)[1:4:2]
+            for band in self.config.bands
+        ]
+        return min(top for top, _ in spans), max(bottom for _, bottom in spans)
 
     def scorers_for(self, view: View, dark: bool = False) -> dict[int, Scorer]:
         """The scorer of each band's patch size for pictures seen as `view` (on a `dark` road)."""
@@ -332,7 +355,8 @@ class VehicleDetector:
         parity = self.frame_index % 2 if cfg.interleave else None
         self.frame_index += 1
         dark = cfg.is_dark(road_grey)
-        seen, averaged, smoothed = self._read(frame, road_grey, grain, view.scale_height)
+        rows = self.band_rows(view)
+        seen, averaged, smoothed = self._read(frame, road_grey, grain, view.scale_height, rows)
         hits = self.search(seen, parity, view, dark)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
         proba, checked, density = self.window_terms(hits, view, dark)
