@@ -819,9 +819,9 @@ def test_on_a_grainy_road_the_windows_read_the_colour_smoothed(model: VehicleMod
 def test_the_colour_is_smoothed_over_the_bands_rows_as_over_the_whole_frame(
     model: VehicleModel,
 ) -> None:
-    """The windows read the rows of their bands alone: the colour is smoothed over those rows
-    (with a margin as wide as the Gaussian reaches), exactly as smoothing the whole frame would
-    smooth them, and the rows above and below are left as they are."""
+    """The windows read the rows of their bands alone: the colour is smoothed, and the mean of
+    frames taken, over those rows (with a margin as wide as the Gaussian reaches), exactly as
+    over the whole frame, and the rows above and below are left as they are."""
     rng = np.random.default_rng(3)
     frame = rng.integers(0, 256, (180, 320, 3), dtype=np.uint8)
     for sigma, rows in ((2.0, (60, 150)), (3.7, (0, 40)), (1.0, (170, 180))):
@@ -832,15 +832,22 @@ def test_the_colour_is_smoothed_over_the_bands_rows_as_over_the_whole_frame(
         np.testing.assert_array_equal(part[:top], frame[:top])
         np.testing.assert_array_equal(part[bottom:], frame[bottom:])
         assert not np.array_equal(whole[top:bottom], frame[top:bottom])
-    # In a frame, the rows of every band, the lowest reaching the frame's bottom.
+    # In a frame, the rows of every band, the lowest reaching the frame's bottom; there, on a
+    # dark grainy road, the mean of the frames smoothed as the whole frame's, the sky as it is.
     detector = VehicleDetector(model)
     top, bottom = detector.band_rows(detector.view((1280, 720)))
     assert 300 < top < 420 and 600 < bottom <= 720
-    big = np.ascontiguousarray(np.resize(frame, (720, 1280, 3)))
-    result = VehicleDetector(model, keep_debug=True).process(big, grain=1.0)
-    assert result.debug is not None and result.debug.seen is not None
-    np.testing.assert_array_equal(result.debug.seen[:top], big[:top])
-    assert not np.array_equal(result.debug.seen[top:bottom], big[top:bottom])
+    over_all = VehicleDetector(model)
+    over_bands = VehicleDetector(model, keep_debug=True)
+    for shift in range(3):
+        big = np.ascontiguousarray(np.resize(np.roll(frame, shift, axis=1), (720, 1280, 3)))
+        result = over_bands.process(big, road_grey=30.0, grain=1.0)
+        everywhere = over_all.seen(big, 30.0, 1.0, 720.0)
+        assert result.debug is not None and result.debug.seen is not None
+        assert result.debug.averaged == shift + 1
+        np.testing.assert_array_equal(result.debug.seen[top:bottom], everywhere[top:bottom])
+        np.testing.assert_array_equal(result.debug.seen[: top - 20], big[: top - 20])
+        assert not np.array_equal(result.debug.seen[top:bottom], big[top:bottom])
 
 
 def test_debug_shows_the_picture_the_windows_read(model: VehicleModel) -> None:
