@@ -17,7 +17,13 @@ from camera_cal import build_undistorter, default_calibration_path, load_calibra
 from tests.helpers import process_clip, raised_camera
 from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
 from vehicles.detections import Detections
-from vehicles.detector import Scorer, VehicleDetector, chroma_smoothed, parts_of_larger
+from vehicles.detector import (
+    Scorer,
+    VehicleDetector,
+    chroma_smoothed,
+    parts_of_larger,
+    seen_picture,
+)
 from vehicles.features import patch_features
 from vehicles.heatmap import Heatmap
 from vehicles.model import (
@@ -826,7 +832,7 @@ def test_the_colour_is_smoothed_over_the_bands_rows_as_over_the_whole_frame(
     frame = rng.integers(0, 256, (180, 320, 3), dtype=np.uint8)
     for sigma, rows in ((2.0, (60, 150)), (3.7, (0, 40)), (1.0, (170, 180))):
         whole = chroma_smoothed(frame, sigma)
-        part = chroma_smoothed(frame, sigma, rows)
+        part = seen_picture([frame], sigma, rows)
         top, bottom = rows
         np.testing.assert_array_equal(part[top:bottom], whole[top:bottom])
         np.testing.assert_array_equal(part[:top], frame[:top])
