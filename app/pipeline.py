@@ -241,6 +241,12 @@ class Pipeline:
                     lanes.min_lane_width_m / lanes.lane_width_m,
                     lanes.max_lane_width_m / lanes.lane_width_m,
                 ),
+                # A camera calibrated at this size is taken as the tuned one's height until
+                # its lanes say otherwise; another one's lanes are measured before a side is
+                # made up at their width (see GroundScale).
+                assumed=self.calibration is not None
+                and tuple(self.calibration.image_size) == tuple(size),
+                confirm=max(3, round(0.2 * (fps or 25))),
             ),
         )
 
@@ -331,7 +337,9 @@ class Pipeline:
                 (b for k, b in self._vehicle_boxes if k == index - 2 and k >= self._shot_start),
                 None,
             )
-            lane = self.lanes.process(undistorted, **placement, vehicles=around)
+            lane = self.lanes.process(
+                undistorted, **placement, vehicles=around, width_known=self._scene.lane_width_known
+            )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
         return _Started(undistorted, scene, placement, lane, timings, False, index, cut)

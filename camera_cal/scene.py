@@ -256,7 +256,13 @@ class GroundScale:
     the scale moves only when the tuned one fails: the median is one no lane has at the current
     scale, outside `plausible` (the lane finder's 2.6-5.6 m over the tuned 3.7 m), and fewer
     than `believed` of the samples' lanes were believed. It then moves to the median, so the
-    lanes read as the tuned road's."""
+    lanes read as the tuned road's.
+
+    `known` says whether a lane's width in pixels is measured at the current scale: `assumed`
+    (a calibrated camera, taken as the tuned one), or once `confirm` samples read a plausible
+    median at it, or the scale moved to theirs. Until then a lane side made up at the standard
+    width is a guess at an unknown camera's height (the rural road at dusk drew one off the
+    picture in every frame it drew)."""
 
     def __init__(
         self,
@@ -264,25 +270,31 @@ class GroundScale:
         window: int = 250,
         plausible: tuple[float, float] = (0.7, 1.5),
         believed: float = 0.5,
+        confirm: int = 5,
+        assumed: bool = False,
     ) -> None:
         self.least = least
         self.plausible = plausible
         self.believed = believed
+        self.confirm = confirm
         self._samples: deque[tuple[float, bool]] = deque(maxlen=window)
         self.value = 1.0
+        self.known = assumed
 
     def add(self, sample: float | None, believed: bool = False) -> float:
         """Take in one frame's sample (None: no lane measured) and whether its lane was believed;
         the scale as of it."""
         if sample is not None and sample > 0:
             self._samples.append((sample, believed))
-            if len(self._samples) >= self.least:
-                widths, trusted = np.array(self._samples).T
-                median = float(np.median(widths))
-                low, high = self.plausible
-                implausible = not low <= median / self.value <= high
-                if implausible and trusted.mean() < self.believed:
-                    self.value = round(median, 3)
+            widths, trusted = np.array(self._samples).T
+            median = float(np.median(widths))
+            low, high = self.plausible
+            implausible = not low <= median / self.value <= high
+            if len(self._samples) >= self.least and implausible and trusted.mean() < self.believed:
+                self.value = round(median, 3)
+                self.known = True
+            elif len(self._samples) >= self.confirm and not implausible:
+                self.known = True
         return self.value
 
 
@@ -482,6 +494,11 @@ class SceneTracker:
         """Take in the lane stage's width sample of the last frame (None: none measured) and
         whether the lane finder believed that lane."""
         self.ground.add(sample, believed)
+
+    @property
+    def lane_width_known(self) -> bool:
+        """Whether the lanes' width in pixels is known at the ground scale (see GroundScale)."""
+        return self.ground.known
 
     @property
     def placement(self) -> dict[str, Any]:

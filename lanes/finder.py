@@ -142,11 +142,14 @@ class LaneFinder:
         overlays: Boxes = (),
         ground_scale: float = 1.0,
         vehicles: NDArray[np.float64] | None = None,
+        width_known: bool = True,
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
         from the scene's `horizon_y`, `live` box, `scale_height`, `vanishing_x` and
         `ground_scale` when given); the road's motion is read around the boxes of `vehicles`
         (n, 4: the latest found), the `overlays` and the view's part outside the live picture.
+        Without `width_known` (an unknown camera whose lanes' width in pixels was not measured
+        yet) a side is not made up at the standard width: one side alone is no lane.
         Paint is read through burnt-in `overlays`: a half-transparent caption leaves the paint
         under it visible, and the paint mask's opening along the road drops its letters (hiding
         the captions' boxes lost the night clip's lane in 3 % of its frames)."""
@@ -185,7 +188,7 @@ class LaneFinder:
         if inside is not None:
             status = (*status, inside)
         believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
-        lane, doubt = self._estimate(view)
+        lane, doubt = self._estimate(view, width_known)
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
@@ -359,17 +362,21 @@ class LaneFinder:
             right = left + np.array([0.0, 0.0, lane_px])
         return left, right, made_up
 
-    def _estimate(self, view: BirdsEye) -> tuple[LaneEstimate | None, str | None]:
+    def _estimate(
+        self, view: BirdsEye, width_known: bool = True
+    ) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
-        (too narrow or wide, not parallel, too sharp a bend) or not ours (the camera outside it:
-        the lines' history is then dropped, so the next frame searches near the car): no lane
-        rather than a wrong one."""
+        (too narrow or wide, not parallel, too sharp a bend), not ours (the camera outside it:
+        the lines' history is then dropped, so the next frame searches near the car) or has a
+        side made up at a width not `width_known`: no lane rather than a wrong one."""
         cfg = self.config
         bw, bh = view.size
         lines = self._history_lane(view)
         if lines is None:
             return None, None
-        left, right, _ = lines
+        left, right, made_up = lines
+        if made_up and not width_known:
+            return None, "one side alone, and the lanes' width on this camera not measured yet"
         doubt = implausible_lane(
             left,
             right,

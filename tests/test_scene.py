@@ -234,6 +234,28 @@ def test_the_ground_scale_moves_only_where_the_tuned_one_fails() -> None:
     assert [lower.add(v * 2.6) for v in higher][-1] == pytest.approx(1.625, abs=0.01)
 
 
+def test_a_lane_width_is_known_once_measured_at_the_scale() -> None:
+    """A side made up at the standard width needs the lanes' width in pixels: known from the
+    start where it is `assumed` (a camera calibrated at the frames' size), else once `confirm`
+    samples read a plausible median at the current scale, or once the scale moved to theirs.
+    Frames without a sample, or samples the current scale cannot account for, leave it
+    unknown."""
+    assumed = GroundScale(least=20, window=40, confirm=5, assumed=True)
+    assert assumed.known
+    tuned = GroundScale(least=20, window=40, confirm=5)
+    known = []
+    for sample in (None, None, 1.02, 0.98, 1.0, 1.01, 0.99):
+        tuned.add(sample)
+        known.append(tuned.known)
+    assert known == [False] * 6 + [True]
+    higher = GroundScale(least=20, window=40, confirm=5)  # a camera 1.6 times higher
+    known = []
+    for k in range(20):
+        higher.add(0.625 + 0.01 * (k % 3 - 1))
+        known.append(higher.known)
+    assert known == [False] * 19 + [True] and higher.value == 0.625
+
+
 @pytest.mark.parametrize(
     ("live", "expected"),
     [
