@@ -12,10 +12,12 @@ from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
-from app.mounting import Mounting, check_mounting, video_mounting
+from app.mounting import Mounting, camera_height_note, check_mounting, video_mounting
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
@@ -30,6 +32,7 @@ from app.sources import (
     within_size,
 )
 from camera_cal import Calibration, fits, monochrome
+from lanes.config import LaneConfig
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
 
@@ -174,8 +177,11 @@ def process_video(
         # Colour is looked for in every 5th frame of the first 2 s: a fade from black or a
         # camera starting up shows none at first.
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
+        scales: list[float] = []  # the lanes' ground scale at each frame
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
+            if out.result.scene is not None:
+                scales.append(out.result.scene.ground_scale)
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:
@@ -199,6 +205,15 @@ def process_video(
                 f"note: {source.name} cuts to another shot at {at}; the stages started over "
                 "there (the scene measured afresh where another camera's picture begins)"
             )
+        height = (
+            camera_height_note(
+                float(np.median(scales)), pipeline.tuned_height_m, LaneConfig().lane_width_m
+            )
+            if scales and vehicles is not None and pipeline.mounting.camera_height_m is None
+            else None
+        )
+        if height is not None:
+            log(f"note: {source.name}: {height}")
         events = tuple(pipeline.finish_events())
         if events_file is not None:
             event_sink = sinks.enter_context(RecordSink(events_file))

@@ -41,6 +41,26 @@ def check_camera_height(height_m: float | None) -> None:
         )
 
 
+def camera_height_note(
+    ground_scale: float, tuned_height_m: float, lane_width_m: float
+) -> str | None:
+    """What a user not stating the camera's height should hear where the lanes' learned
+    `ground_scale` moved: they read as `lane_width_m` lanes seen from another height than the
+    tuned camera's `tuned_height_m`, or as other lanes from that height. The vehicle windows
+    stay sized for the tuned height (the road cannot tell the two apart; a car's size depends
+    on the height alone), so the note gives the height the lanes imply and how to state it."""
+    if ground_scale == 1.0 or ground_scale <= 0:
+        return None
+    implied = tuned_height_m / ground_scale
+    return (
+        f"its lanes read as {lane_width_m:g} m lanes seen from {implied:.1f} m over the road, or "
+        f"as {'narrower' if ground_scale < 1 else 'wider'} lanes seen from {tuned_height_m:.2f} m "
+        f"(the tuned camera's height, for which the vehicle windows are sized); if the camera is "
+        f"mounted {'higher' if ground_scale < 1 else 'lower'}, pass --camera-height "
+        f"{implied:.1f} (or its measured height) so they fit its vehicles"
+    )
+
+
 # How far a user may say the picture is turned, in degrees: a dashcam mounted askew, not one
 # on its side (a phone held upright is turned by its rotation tag).
 MAX_ROLL_DEG = 30.0

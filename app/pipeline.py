@@ -137,6 +137,7 @@ class Pipeline:
         self._worker: StageWorker | None = None
         self._geometry: RoadGeometry | None = None
         self._default_horizon = 0.0  # the default warp's, where a scene starts (see `prepare`)
+        self.tuned_height_m = 0.0  # the tuned camera's height as the default warp reads it
         self._scene: SceneTracker | None = None
         self._facts: FactsTracker | None = None
         self._events = EventDetector()
@@ -184,6 +185,7 @@ class Pipeline:
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         self._default_horizon = self._geometry.horizon_y
+        self.tuned_height_m = self._geometry.camera_height_m
         # The lanes' ground scale is learned from their width: the warp needs the lanes' width
         # in the picture, whether a higher camera or narrower lanes make it. A car's size
         # depends on the camera's height alone, which the road does not tell: the vehicle

@@ -221,6 +221,35 @@ def test_camera_height_option(test_video: Path, tmp_path: Path) -> None:
     assert not (tmp_path / "x.mp4").exists()
 
 
+def test_lanes_read_from_another_height_suggest_the_camera_height(
+    wild_dir: Path, test_video: Path, tmp_path: Path
+) -> None:
+    """The wet rural road's lanes read 0.67 of the tuned camera's width at a row (a camera
+    1.5 times higher, or narrower lanes: the road does not tell): the vehicle windows stay sized
+    for the tuned camera, and `process` says what height the lanes imply and how to state it.
+    Told the height, or on the tuned camera's own footage, it says nothing of it."""
+    from app.mounting import camera_height_note
+
+    rural = wild_dir / "rural_2lane_wet.mp4"
+    runs = {
+        name: run_cli("process", video, "-o", tmp_path / f"{name}.mp4", "--end", "3", *extra)
+        for name, video, extra in (
+            ("untold", rural, ("--calibration", "none")),
+            ("told", rural, ("--calibration", "none", "--camera-height", "1.9")),
+            ("tuned", test_video, ()),
+        )
+    }
+    assert all(r.returncode == 0 for r in runs.values()), {k: r.stderr for k, r in runs.items()}
+    notes = {name: r.stdout + r.stderr for name, r in runs.items()}
+    assert "pass --camera-height 1.9" in notes["untold"], notes["untold"]
+    assert "--camera-height" not in notes["told"] + notes["tuned"]
+    # The note's direction and height follow the scale.
+    assert camera_height_note(1.0, 1.24, 3.7) is None
+    higher, lower = camera_height_note(0.62, 1.24, 3.7), camera_height_note(1.24, 1.24, 3.7)
+    assert higher is not None and "2.0 m over" in higher and "mounted higher" in higher
+    assert lower is not None and "1.0 m over" in lower and "mounted lower" in lower
+
+
 def _turned_labels(document: dict[str, Any], turn: np.ndarray) -> dict[str, Any]:
     """Vehicle labels turned as the picture is by the 2x3 affine `turn`: each box the bounds of
     its turned corners, less half their growth (a car is no rectangle); lanes left out."""
