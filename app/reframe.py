@@ -126,20 +126,24 @@ class Framing:
 def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     """The framings of issue #15 for a `source`-sized clip: as it is, horizon 10 % of the height
     higher (crop the top) and lower (pad the top, crop the bottom), a narrower field of view (the
-    middle 80 % enlarged back), a 4:3 crop, black side bars, two other sizes and half the size
-    (many phones' and dashcams' small copies), half and twice the frame rate, mirrored
+    middle 80 % enlarged back), a 4:3 crop, a 21:9 crop (an ultra-wide dashcam's picture: the
+    top and bottom cut, the bonnet and the nearest road with them), black side bars, two other
+    sizes and half the size (many phones' and dashcams' small copies), half and twice the frame
+    rate, mirrored
     (traffic keeping left, as in the UK, India or Japan), and turned 3 degrees (a camera
     mounted askew, levelled by `--roll`)."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)
     narrow = (round(0.1 * w), round(0.1 * h), w - round(0.1 * w), h - round(0.1 * h))
+    wide = round(w * 9 / 21)
     return (
         Framing("as is"),
         Framing("horizon up", crop=(0, cut, w, h)),
         Framing("horizon down", crop=(0, 0, w, h - cut), pad=(0, cut, 0, 0)),
         Framing("narrower view", crop=narrow, size=(w, h)),
         Framing("4:3 crop", crop=(side, 0, w - side, h)),
+        Framing("21:9 crop", crop=(0, (h - wide) // 2, w, (h - wide) // 2 + wide)),
         Framing("side bars", crop=(side, 0, w - side, h), pad=(side, 0, side, 0)),
         Framing("960x540", size=(round(w * 0.75), round(h * 0.75))),
         Framing("1920x1080", size=(round(w * 1.5), round(h * 1.5))),

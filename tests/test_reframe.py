@@ -103,8 +103,8 @@ def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
 
 @pytest.mark.slow
 def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
-    """The labelled clips re-framed (horizon 10 % up and down, a narrower view, 4:3, black side
-    bars, 960x540, 1920x1080, 640x360, half and twice the frame rate, mirrored, mirrored
+    """The labelled clips re-framed (horizon 10 % up and down, a narrower view, 4:3, 21:9,
+    black side bars, 960x540, 1920x1080, 640x360, half and twice the frame rate, mirrored, mirrored
     with `--traffic left`, and turned 3 degrees with `--roll 3`) and run without calibration, as
     footage of an unknown camera: pooled over the three clips, the vehicles, their distances,
     the speed and the lane stay close to the clips as they are."""
