@@ -231,6 +231,8 @@ FRAME_COLUMNS = (
     ("ttc_s", "double"),
     ("road_grey", "double"),
     ("grain", "double"),
+    ("horizon_y", "double"),
+    ("ground_scale", "double"),
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -285,6 +287,8 @@ def write_table_parts(
             "ttc_s": r.get("ttc_s"),
             "road_grey": r.get("road_grey"),
             "grain": r.get("grain"),
+            "horizon_y": r.get("horizon_y"),
+            "ground_scale": r.get("ground_scale"),
         }
         for r in rows
     ]

@@ -93,8 +93,9 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
     # The facts are in the tables as in the record; the events table exists (no event here).
     speeds = [f["speed_kmh"] for f in frames if f["video"] == "sub/project_cut_2.mp4"]
     assert speeds == [r["speed_kmh"] for r in lines]
-    greys = [f["road_grey"] for f in frames if f["video"] == "sub/project_cut_2.mp4"]
-    assert greys == [r["road_grey"] for r in lines]
+    for column in ("road_grey", "horizon_y", "ground_scale"):
+        values = [f[column] for f in frames if f["video"] == "sub/project_cut_2.mp4"]
+        assert values == [r[column] for r in lines], column
     assert {v["lane"] for v in vehicles} <= {"ego", "left", "right", "other"}
     events = ds.dataset(out / "table" / "events").to_table()
     assert events.num_rows == 0 and "vehicle_id" in events.column_names
