@@ -991,6 +991,47 @@ def test_grainy_dusk_footage_at_a_dashcams_bitrate_is_read_with_its_colour_smoot
     assert fp <= fp_alone / 20 and tp > tp_alone, totals
 
 
+def test_the_mean_of_more_frames_is_read_on_a_very_grainy_dark_road() -> None:
+    """A bright road: the frame alone, or the mean of `grain_frames` from `very_grainy`. A dark
+    one: the mean of `dark_frames`, or of `grain_frames` from `dark_grain` (unknown grain: as
+    a dark road without it)."""
+    cfg = DetectorConfig()
+    bright, dark = cfg.dark_road[3] + 10, cfg.dark_road[1]
+    assert cfg.dark_frames < cfg.grain_frames and cfg.very_grainy < cfg.dark_grain
+    assert cfg.averaged_frames(bright, 0.1) == 1
+    assert cfg.averaged_frames(bright, cfg.very_grainy) == cfg.grain_frames
+    assert cfg.averaged_frames(dark, None) == cfg.dark_frames
+    assert cfg.averaged_frames(dark, (cfg.very_grainy + cfg.dark_grain) / 2) == cfg.dark_frames
+    assert cfg.averaged_frames(dark, cfg.dark_grain) == cfg.grain_frames
+
+
+@pytest.mark.slow
+def test_very_grainy_dusk_footage_reads_the_mean_of_more_frames(
+    data_dir: Path, tmp_path: Path
+) -> None:
+    """The three clips dimmed to dusk with grain of strength 10 at a dashcam's bitrate: the grain
+    reads 5.7, past `dark_grain`, and on the dark road the windows read the mean of 5 frames:
+    at most a fifth of the false boxes of 3 frames (14), and at most 3 % fewer cars."""
+    from app.mining import dimmed_copy, grainy
+
+    shipped = DetectorConfig()
+    totals = {"shipped": [0, 0], "3 frames": [0, 0]}
+    for clip in ("test_video", "project_cut_1", "project_cut_2"):
+        copy = dimmed_copy(
+            data_dir / "videos" / f"{clip}.mp4", grainy(10, dusk=True), tmp_path / f"{clip}.mp4"
+        )
+        labels = load_labels(data_dir / "labels" / f"{clip}.json")
+        for name, counts in totals.items():
+            changes: dict[str, Any] = {} if name == "shipped" else {"dark_grain": float("inf")}
+            record = tmp_path / f"{clip}_{name}.jsonl"
+            tp, fp, frames = _boxes_on(copy, labels, record, **changes)
+            assert float(np.median([f["grain"] for f in frames])) >= shipped.dark_grain
+            counts[0] += tp
+            counts[1] += fp
+    (tp, fp), (tp_3, fp_3) = totals["shipped"], totals["3 frames"]
+    assert fp_3 >= 5 and fp <= fp_3 / 5 and tp >= 0.97 * tp_3, totals
+
+
 @pytest.mark.slow
 def test_grainy_dark_footage_keeps_its_precision(data_dir: Path, tmp_path: Path) -> None:
     """The three clips darkened and given a dim sensor's grain before encoding (as the README's
