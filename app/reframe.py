@@ -129,9 +129,8 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     middle 80 % enlarged back), a 4:3 crop, a 21:9 crop (an ultra-wide dashcam's picture: the
     top and bottom cut, the bonnet and the nearest road with them), black side bars, two other
     sizes and half the size (many phones' and dashcams' small copies), half and twice the frame
-    rate, mirrored
-    (traffic keeping left, as in the UK, India or Japan), and turned 3 degrees (a camera
-    mounted askew, levelled by `--roll`)."""
+    rate, mirrored (traffic keeping left, as in the UK, India or Japan), and turned 3 degrees
+    (a camera mounted askew, levelled by `--roll`)."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)

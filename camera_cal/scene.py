@@ -259,10 +259,10 @@ class GroundScale:
     lanes read as the tuned road's.
 
     `known` says whether a lane's width in pixels is measured at the current scale: `assumed`
-    (a calibrated camera, taken as the tuned one), or once `confirm` samples read a plausible
-    median at it, or the scale moved to theirs. Until then a lane side made up at the standard
-    width is a guess at an unknown camera's height (the rural road at dusk drew one off the
-    picture in every frame it drew)."""
+    (the pipeline assumes it for a camera calibrated at the frames' size), or once `confirm`
+    samples read a plausible median at it, or the scale moved to theirs. Until then a lane side
+    made up at the standard width is a guess at an unknown camera's height (the rural road at
+    dusk drew one off the picture in every frame it drew)."""
 
     def __init__(
         self,
