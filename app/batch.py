@@ -73,6 +73,7 @@ class ManifestRow:
     video_seconds: float
     processing_seconds: float
     worker: str
+    notes: str = ""  # what `process` would have said of the input (one note a line)
 
 
 def find_inputs(items: Iterable[Path]) -> list[BatchInput]:
@@ -139,7 +140,7 @@ def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str
     started = time.perf_counter()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     try:
-        frames, seconds = _run_video(entry, options)
+        frames, seconds, notes = _run_video(entry, options)
         return ManifestRow(
             str(entry.path),
             size,
@@ -150,6 +151,7 @@ def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str
             seconds,
             time.perf_counter() - started,
             worker,
+            "\n".join(notes),
         )
     except USER_ERRORS as error:
         message = describe(error)
@@ -176,8 +178,10 @@ def _classifier(model: str | None) -> VehicleModel:
     return load_model(Path(model) if model else None)
 
 
-def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
-    """Process one video as `roadview process` does, then write its table parts."""
+def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float, list[str]]:
+    """Process one video as `roadview process` does, then write its table parts; its frames,
+    seconds and the notes `process` would print (another camera, no colour, cuts, the height
+    the lanes imply)."""
     from app.annotators import default_annotators
     from app.assembly import build_stages
     from app.drivers import process_video
@@ -190,6 +194,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
     video, record = outputs_of(entry, options.out)
     calibration = load_calibration(Path(options.calibration)) if options.calibration else None
     stages = build_stages(classifier=_classifier(options.model))
+    notes: list[str] = []
     # In-process: a Dask worker must not fork helpers; parallelism comes from many videos.
     summary = process_video(
         entry.path,
@@ -202,12 +207,13 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float]:
         calibration_required=options.calibration_required,
         max_size=options.max_size,
         mounting=options.mounting,
+        log=notes.append,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = [json.loads(line) for line in record.read_text().splitlines()]
     events = [event_record(e) for e in summary.events]
     write_table_parts(options.out / TABLE, _key(entry), str(entry.relative), rows, events)
-    return summary.frames, summary.video_seconds
+    return summary.frames, summary.video_seconds, notes
 
 
 def _schema(*columns: tuple[str, str]) -> Any:

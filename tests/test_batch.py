@@ -258,3 +258,8 @@ def test_a_clip_of_another_camera_is_done_without_undistortion(
     assert result.returncode == 0, result.stderr
     assert "1 done, 0 failed" in result.stdout
     assert read_record(out / "square.jsonl")[0]["size"] == [640, 480]
+    # What `process` would say of it is in its manifest row.
+    import pyarrow.parquet as pq
+
+    (row,) = pq.read_table(out / "table" / "manifest.parquet").to_pylist()
+    assert "square.mp4" in row["notes"] and "without undistortion" in row["notes"], row
