@@ -17,7 +17,7 @@ import numpy as np
 from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
-from app.mounting import Mounting, camera_height_note, check_mounting, video_mounting
+from app.mounting import Mounting, check_mounting, video_mounting
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
@@ -32,7 +32,6 @@ from app.sources import (
     within_size,
 )
 from camera_cal import Calibration, fits, monochrome
-from lanes.config import LaneConfig
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
 
@@ -205,13 +204,7 @@ def process_video(
                 f"note: {source.name} cuts to another shot at {at}; the stages started over "
                 "there (the scene measured afresh where another camera's picture begins)"
             )
-        height = (
-            camera_height_note(
-                float(np.median(scales)), pipeline.tuned_height_m, LaneConfig().lane_width_m
-            )
-            if scales and vehicles is not None and pipeline.mounting.camera_height_m is None
-            else None
-        )
+        height = pipeline.height_note(float(np.median(scales))) if scales else None
         if height is not None:
             log(f"note: {source.name}: {height}")
         events = tuple(pipeline.finish_events())

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from app.errors import FrameSizeChanged
 from app.events import Event, EventDetector, FrameSignals
 from app.facts import FactsTracker, FrameFacts, RoadGeometry
-from app.mounting import Mounting
+from app.mounting import Mounting, camera_height_note
 from app.sources import Frame
 from app.stages import FrameStage
 from app.traffic import KeepLeft
@@ -137,7 +137,6 @@ class Pipeline:
         self._worker: StageWorker | None = None
         self._geometry: RoadGeometry | None = None
         self._default_horizon = 0.0  # the default warp's, where a scene starts (see `prepare`)
-        self.tuned_height_m = 0.0  # the tuned camera's height as the default warp reads it
         self._scene: SceneTracker | None = None
         self._facts: FactsTracker | None = None
         self._events = EventDetector()
@@ -185,7 +184,6 @@ class Pipeline:
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
         self._geometry = RoadGeometry.of(view)
         self._default_horizon = self._geometry.horizon_y
-        self.tuned_height_m = self._geometry.camera_height_m
         # The lanes' ground scale is learned from their width: the warp needs the lanes' width
         # in the picture, whether a higher camera or narrower lanes make it. A car's size
         # depends on the camera's height alone, which the road does not tell: the vehicle
@@ -216,6 +214,17 @@ class Pipeline:
         elif self.vehicles_in_worker and self.vehicles is not None:
             # Forked now, before any reader/writer thread exists, with fresh stage history.
             self._worker = StageWorker(self.vehicles, frame_bytes)
+
+    def height_note(self, ground_scale: float) -> str | None:
+        """What a user should hear of the lanes' `ground_scale` (see `camera_height_note`), or
+        None: the scale did not move, no lanes measured it, no vehicle windows are sized, or
+        the user stated the camera's height."""
+        if self.lanes is None or self.vehicles is None or self.size is None:
+            return None
+        if self.mounting.camera_height_m is not None:
+            return None
+        tuned = RoadGeometry.of(self.lanes.view(self.size)).camera_height_m
+        return camera_height_note(ground_scale, tuned, self.lanes.config.lane_width_m)
 
     @property
     def _unknown_camera(self) -> bool:

@@ -363,7 +363,7 @@ class LaneFinder:
         return left, right, made_up
 
     def _estimate(
-        self, view: BirdsEye, width_known: bool = True
+        self, view: BirdsEye, width_known: bool
     ) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
         (too narrow or wide, not parallel, too sharp a bend), not ours (the camera outside it:
