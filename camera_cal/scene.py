@@ -183,18 +183,23 @@ def edge_gain(part: NDArray[np.uint8], paint_grey: float = 100.0, floor: float =
 
 
 def road_segments(
-    grey: NDArray[np.uint8], live: Box, top: int, hidden: tuple[Box, ...] = ()
+    grey: NDArray[np.uint8],
+    live: Box,
+    top: int,
+    hidden: tuple[Box, ...] = (),
+    strength: float = 1.0,
 ) -> NDArray[np.float64]:
     """Straight edge segments (x1, y1, x2, y2) below row `top` inside the live box and outside
     the `hidden` boxes (captions), slanted 20-75 degrees from the horizontal as the road's edges
     are seen ahead. Edges are thresholded in proportion to the picture's brightness
-    (`edge_gain`): by day at fixed strengths, on a dim picture at weaker ones."""
+    (`edge_gain`): by day at fixed strengths, on a dim picture at weaker ones; `strength`
+    scales them further (paint on pale concrete shows weaker edges than on asphalt)."""
     x0, y0, x1, y1 = live
     top = max(top, y0)
     if y1 - top < 16 or x1 - x0 < 16:
         return np.empty((0, 4))
     part = cv2.GaussianBlur(grey[top:y1, x0:x1], (5, 5), 0)
-    gain = edge_gain(part)
+    gain = edge_gain(part) * strength
     edges = cv2.Canny(part, 60 * gain, 150 * gain)
     # Bar edges and the picture's border are no road edges; nor are a caption's letters.
     edges[:, :3] = edges[:, -3:] = 0
@@ -309,7 +314,7 @@ class SceneTracker:
     then, and every `every` frames after (it changes slowly; each costs a few milliseconds).
     With `full_size_first` (the app sets it for an unknown camera, whose stages wait for the
     first horizon), a frame the picture shrunk to `MEASURE_WIDTH` gives no point for is measured
-    again at full size until then.
+    again at full size until then, and failing that with edges `weak_edges` as strong.
     The stages' placement follows the horizon and live box in steps of `settle` of the height,
     and the vanishing point's column in steps of `settle_x` of the live width (a bend ahead
     moves it by a few per cent; a camera turned sideways by more).
@@ -337,8 +342,10 @@ class SceneTracker:
         light_every: int = 5,
         light_window: int = 15,
         full_size_first: bool = False,
+        weak_edges: float = 0.6,
     ) -> None:
         self.size = size
+        self.weak_edges = weak_edges
         self.ground = ground if ground is not None else GroundScale()
         self.fixed_scale = fixed_scale
         self.default_horizon = default_horizon
@@ -447,6 +454,10 @@ class SceneTracker:
             waiting = self.full_size_first and before < self.min_estimates
             if waiting and len(self._estimates) == before and self._scale < 1:
                 self._measure(grey, 1.0, live, overlays)
+            # ... and then with weaker edges: on pale concrete the yellow line is hardly darker
+            # or lighter than the road, and the first horizon took 39 frames (README).
+            if waiting and len(self._estimates) == before:
+                self._measure(small, self._scale, live, overlays, self.weak_edges)
         if self._count % self.light_every == 0:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
             source = grey if decoded is None else decoded
@@ -548,28 +559,38 @@ class SceneTracker:
         )
 
     def _point(
-        self, small: NDArray[np.uint8], scale: float, live: Box, overlays: tuple[Box, ...]
+        self,
+        small: NDArray[np.uint8],
+        scale: float,
+        live: Box,
+        overlays: tuple[Box, ...],
+        strength: float = 1.0,
     ) -> tuple[float, float] | None:
         """The vanishing point (x, y) in frame pixels of the road's edges outside the
         `overlays`, in the live box below the current horizon (`small`: the picture shrunk by
-        `scale`), or None."""
+        `scale`; edges at `strength`, see `road_segments`), or None."""
         x0, y0, x1, y1 = (round(v * scale) for v in live)
         hidden = tuple(scale_box(box, scale) for box in overlays)
         h = y1 - y0
         # Edges from a little below the current horizon down: the road, not the sky.
         top = round(max(self._current.horizon_y * scale, y0 + 0.2 * h) + 0.05 * h)
-        segments = road_segments(small, (x0, y0, x1, y1), top, hidden)
+        segments = road_segments(small, (x0, y0, x1, y1), top, hidden, strength)
         point = vanishing_point(segments, tolerance=0.02 * h)
         if point is None or not x0 <= point[0] < x1:
             return None
         return float(point[0]) / scale, float(point[1]) / scale
 
     def _measure(
-        self, small: NDArray[np.uint8], scale: float, live: Box, overlays: tuple[Box, ...]
+        self,
+        small: NDArray[np.uint8],
+        scale: float,
+        live: Box,
+        overlays: tuple[Box, ...],
+        strength: float = 1.0,
     ) -> None:
         """Add this frame's vanishing point, when the road's edges outside the `overlays` give
-        one (`small`: the picture shrunk by `scale`)."""
-        estimate = self._point(small, scale, live, overlays)
+        one (`small`: the picture shrunk by `scale`; edges at `strength`)."""
+        estimate = self._point(small, scale, live, overlays, strength)
         if estimate is None:
             return
         _, y0, _, y1 = (round(v * scale) for v in live)  # as the shrunk picture's rows

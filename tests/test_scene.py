@@ -29,18 +29,25 @@ from tests.helpers import assert_one_line_error, moving_road, process_clip, run_
 Frame = np.ndarray
 
 
-def _road(size: tuple[int, int], vp: tuple[float, float], bars: int = 0) -> Frame:
-    """A synthetic road: grey asphalt below the horizon with four painted lines converging to
-    `vp`, sky above, and black bars `bars` pixels wide at both sides."""
+def _road(
+    size: tuple[int, int],
+    vp: tuple[float, float],
+    bars: int = 0,
+    ground: int = 90,
+    paint: int = 240,
+) -> Frame:
+    """A synthetic road: grey asphalt (`ground` grey levels) below the horizon with four lines
+    painted `paint` converging to `vp`, sky above, and black bars `bars` pixels wide at both
+    sides."""
     w, h = size
     frame = np.zeros((h, w, 3), np.uint8)
     frame[: round(vp[1])] = (150, 180, 220)
-    frame[round(vp[1]) :] = (90, 90, 90)
+    frame[round(vp[1]) :] = ground
     for foot in (-0.6, -0.1, 0.5, 1.2):  # where each line meets the bottom row, in widths
         x_bottom = vp[0] + foot * w
         top = vp[1] + 0.08 * h
         x_top = vp[0] + (x_bottom - vp[0]) * (top - vp[1]) / (h - 1 - vp[1])
-        cv2.line(frame, (round(x_top), round(top)), (round(x_bottom), h - 1), (240, 240, 240), 6)
+        cv2.line(frame, (round(x_top), round(top)), (round(x_bottom), h - 1), (paint,) * 3, 6)
     if bars:
         frame[:, :bars] = 0
         frame[:, w - bars :] = 0
@@ -90,6 +97,22 @@ def test_the_lines_of_a_dim_road_are_found_as_by_day() -> None:
         assert edge_gain(dim) < 0.7
         point = vanishing_point(road_segments(dim, (0, 0, *size), 290), tolerance=10)
         assert point is not None and np.allclose(point, vp, atol=4)
+
+
+def test_faint_lines_on_a_pale_road_give_the_first_horizon() -> None:
+    """Paint 30 grey levels lighter than a pale road (concrete in sunlight; the yellow line is
+    as light as it in grey) gives edges too weak for the day's thresholds. While an unknown
+    camera waits for its first horizon, a frame that gives no vanishing point is looked at
+    again with edges 0.6 as strong: the horizon stands; without that it does not."""
+    size, vp = (960, 540), (500.0, 260.0)
+    pale = _road(size, vp, ground=150, paint=180)
+    for weak, found in ((0.6, True), (1.0, False)):
+        tracker = SceneTracker(
+            size, default_horizon=300.0, every=1, full_size_first=True, weak_edges=weak
+        )
+        scene = [tracker.update(pale) for _ in range(8)][-1]
+        assert scene.estimated == found
+        assert not found or abs(scene.horizon_y - vp[1]) < 4
 
 
 def test_a_black_night_sky_is_picture_and_a_black_band_above_a_sky_is_a_bar() -> None:
