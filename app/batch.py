@@ -239,6 +239,7 @@ FRAME_COLUMNS = (
     ("grain", "double"),
     ("horizon_y", "double"),
     ("ground_scale", "double"),
+    ("rear", "bool"),
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -295,6 +296,7 @@ def write_table_parts(
             "grain": r.get("grain"),
             "horizon_y": r.get("horizon_y"),
             "ground_scale": r.get("ground_scale"),
+            "rear": r.get("facing") == "rear",
         }
         for r in rows
     ]

@@ -102,6 +102,27 @@ TrafficOption = Annotated[
 ]
 
 
+FacingOption = Annotated[
+    str,
+    typer.Option(
+        "--facing",
+        metavar="auto|front|rear",
+        help="Which way the camera looks: 'rear' for a dual-channel dashcam's rear file (the "
+        "speed is read from the road moving away, the vehicle search sees the road's sides "
+        "swapped, the vehicle in our lane is the one behind); 'auto' reads it from the road's "
+        "motion, but searches vehicles as for a front camera.",
+    ),
+]
+
+
+def _rear(facing: str) -> bool | None:
+    """Whether `--facing` says the camera looks back (None: auto); anything else is refused."""
+    way = facing.strip().lower()
+    if way not in ("auto", "front", "rear"):
+        raise InputError(f"--facing {facing} is not a way a camera looks; give auto, front or rear")
+    return None if way == "auto" else way == "rear"
+
+
 def _max_size(pixels: int) -> int:
     """The --max-size option: 0, or a size the stages can work at."""
     if pixels != 0 and pixels < 240:
@@ -289,6 +310,7 @@ def process_command(
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
     roll: RollOption = 0.0,
+    facing: FacingOption = "auto",
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -298,7 +320,7 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
-    mounting = Mounting(horizon, camera_height, _keep_left(traffic), roll)
+    mounting = Mounting(horizon, camera_height, _keep_left(traffic), roll, _rear(facing))
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
@@ -370,11 +392,12 @@ def batch_command(
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
     roll: RollOption = 0.0,
+    facing: FacingOption = "auto",
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
 
-    mounting = Mounting(None, camera_height, _keep_left(traffic), roll)
+    mounting = Mounting(None, camera_height, _keep_left(traffic), roll, _rear(facing))
     check_mounting(mounting)
     entries = find_inputs(inputs)
     if not entries:
@@ -412,6 +435,7 @@ def debug_command(
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
     roll: RollOption = 0.0,
+    facing: FacingOption = "auto",
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -427,7 +451,9 @@ def debug_command(
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
     pipeline = Pipeline(
-        cal, *stages, mounting=Mounting(horizon, camera_height, _keep_left(traffic), roll)
+        cal,
+        *stages,
+        mounting=Mounting(horizon, camera_height, _keep_left(traffic), roll, _rear(facing)),
     )
     written = run_debug(
         source,

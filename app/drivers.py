@@ -66,6 +66,13 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
 
 
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
+REAR_NOTE = (
+    "a rear camera's footage (the road moves away from it; or it plays backwards): its speed is "
+    "read so, and the headway, time to collision and events are of the vehicle behind in our "
+    "lane (followed closely, closing fast from behind); pass --facing rear so that the vehicle "
+    "search also sees the road's sides swapped, as a camera looking back does (the classifier "
+    "learned mostly cars' rears and finds fewer of the fronts that follow)"
+)
 MONOCHROME_NOTE = (
     "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
     "(README, Known weaknesses); the lanes are unaffected"
@@ -177,10 +184,12 @@ def process_video(
         # camera starting up shows none at first.
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         scales: list[float] = []  # the lanes' ground scale at each frame
+        rear = False  # the road seen moving away: a rear camera's footage
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
             if out.result.scene is not None:
                 scales.append(out.result.scene.ground_scale)
+            rear = rear or (out.result.facts is not None and out.result.facts.rear)
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:
@@ -204,6 +213,8 @@ def process_video(
                 f"note: {source.name} cuts to another shot at {at}; the stages started over "
                 "there (the scene measured afresh where another camera's picture begins)"
             )
+        if rear and mounting.rear is None:
+            log(f"note: {source.name} is {REAR_NOTE}")
         height = pipeline.height_note(float(np.median(scales))) if scales else None
         if height is not None:
             log(f"note: {source.name}: {height}")

@@ -1,5 +1,7 @@
 """Driving events from the per-frame facts: lane departure, lane change, close following and
-closing fast, with hysteresis so that they do not flicker.
+closing fast, with hysteresis so that they do not flicker. Seen by a rear camera, the vehicle
+in our lane is the one behind: following closely and closing fast are then its, and the
+picture's sides are the car's swapped.
 
 The detector reads plain numbers per frame (`FrameSignals`), so it runs the same beside the
 pipeline (for the video's banner and `--events`) and over a saved record (`roadview report`).
@@ -20,6 +22,16 @@ KIND_TITLES = {
     "lane_change_right": "lane change right",
     "close_following": "close following",
     "closing_fast": "closing fast",
+    "followed_closely": "followed closely",
+    "closing_fast_behind": "closing fast from behind",
+}
+# What each kind is when a rear camera sees it: the vehicle in our lane follows us, and the
+# picture's left is the car's right (a rear camera's file as its lens sees the road).
+REAR_KINDS = {
+    "close_following": "followed_closely",
+    "closing_fast": "closing_fast_behind",
+    "lane_change_left": "lane_change_right",
+    "lane_change_right": "lane_change_left",
 }
 
 
@@ -53,6 +65,7 @@ class FrameSignals:
     headway_s: float | None = None
     ttc_s: float | None = None
     ahead_id: int | None = None  # the vehicle ahead in our lane
+    rear: bool = False  # seen by a rear camera: that vehicle is behind us
 
 
 @dataclass(frozen=True)
@@ -270,6 +283,7 @@ class EventDetector:
             "closing_fast", cfg.ttc_s, cfg.ttc_exit_s, cfg.closing_hold_s, cfg.release_s
         )
         self.events: list[Event] = []  # every event that ended, in the order they ended
+        self._rear = False  # the last frame was a rear camera's
 
     def reset(self) -> None:
         """Forget everything: a new clip."""
@@ -277,29 +291,35 @@ class EventDetector:
         self._following.reset()
         self._closing.reset()
         self.events.clear()
+        self._rear = False
+
+    def _seen(self, event: Event) -> Event:
+        """The event as the camera's facing makes it (see `REAR_KINDS`)."""
+        return replace(event, kind=REAR_KINDS.get(event.kind, event.kind)) if self._rear else event
 
     def update(self, s: FrameSignals) -> tuple[Event, ...]:
         """Feed one frame; returns the events under way at it."""
+        self._rear = s.rear
         for ended in (
             self._excursion.update(s),
             self._following.update(s, s.headway_s),
             self._closing.update(s, s.ttc_s),
         ):
             if ended is not None:
-                self.events.append(ended)
+                self.events.append(self._seen(ended))
         return self.active
 
     @property
     def active(self) -> tuple[Event, ...]:
         """The events under way (each once it counts)."""
         found = (self._excursion.active, self._following.active, self._closing.active)
-        return tuple(e for e in found if e is not None)
+        return tuple(self._seen(e) for e in found if e is not None)
 
     def close(self) -> None:
         """End what is under way (the footage cut to another shot); the events found stay."""
         for ended in (self._excursion.finish(), self._following.finish(), self._closing.finish()):
             if ended is not None:
-                self.events.append(ended)
+                self.events.append(self._seen(ended))
 
     def finish(self) -> list[Event]:
         """End the footage: close what is under way; every event, by start time."""
@@ -329,7 +349,7 @@ def nearest_ahead(row: Mapping[str, Any]) -> Mapping[str, Any] | None:
 
 def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
     """A record line's signals (see app/record.py): the lane's offset and width, the headway and
-    time to collision, and the nearest vehicle in our lane."""
+    time to collision, the nearest vehicle in our lane, and whether a rear camera saw it."""
     lane = row.get("lane") or {}
     nearest = nearest_ahead(row)
     return FrameSignals(
@@ -340,4 +360,5 @@ def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
         row.get("headway_s"),
         row.get("ttc_s"),
         int(nearest["id"]) if nearest is not None else None,
+        row.get("facing") == "rear",
     )

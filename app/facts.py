@@ -1,5 +1,5 @@
 """Facts from the pictures: distance and lateral position of each vehicle, its lane, how fast it
-closes in, our own speed, headway and time to collision.
+closes in, our own speed, headway and time to collision, and which way the camera faces.
 
 Geometry is the flat-road model of the lane stage's bird's-eye warp: that homography maps road
 points of the frame to metres on the road. For a camera over a flat road the bird's-eye row of a
@@ -120,6 +120,43 @@ class FrameFacts:
     headway_s: float | None = None  # to the nearest vehicle ahead in our lane
     ttc_s: float | None = None  # to it, while it closes in
     ahead_id: int | None = None  # that vehicle
+    # A rear camera (the road moves away): "ahead" is then behind us, the vehicle following.
+    rear: bool = False
+
+
+class Facing:
+    """History for the way the camera faces, read from the road's motion: the road comes
+    towards a front camera and moves away from a rear one (a dual-channel dashcam's rear file,
+    or footage played backwards). Rear once at least `least` frames' advances moved away and
+    they outnumber those that came towards it; the shared and wild clips' road never read as
+    moving away, in any frame (README). A `stated` facing (True: rear) is taken as it is."""
+
+    def __init__(self, least: int, stated: bool | None = None) -> None:
+        self.least = least
+        self.stated = stated
+        self._towards = 0
+        self._away = 0
+
+    def reset(self) -> None:
+        """Forget the advances: another shot, perhaps another camera."""
+        self._towards = self._away = 0
+
+    def update(self, advance_m: float | None) -> bool:
+        """Take in one frame's signed advance (None: not measured); whether the camera faces
+        backwards."""
+        if advance_m is not None and advance_m > 0:
+            self._towards += 1
+        elif advance_m is not None and advance_m < 0:
+            self._away += 1
+        return self.rear
+
+    @property
+    def rear(self) -> bool:
+        """Whether the camera faces backwards: as stated, or the road seen moving away from it
+        more than towards it."""
+        if self.stated is not None:
+            return self.stated
+        return self._away >= self.least and self._away > self._towards
 
 
 class FactsTracker:
@@ -127,11 +164,20 @@ class FactsTracker:
 
     Distances are smoothed along a track (exponential, weight `smoothing` on the new value at
     `frame_rate`, so that the same time is averaged at any `fps`) and the closing speed is the
-    slope of the smoothed distance over the last `window_s` seconds (at least 3 frames).
+    slope of the smoothed distance over the last `window_s` seconds (at least 3 frames). Our
+    speed is the road's advance towards a front camera, or away from a rear one once `Facing`
+    read it so over `facing_s` seconds or the user `rear` said so (before, and against the
+    facing, it is not known).
     """
 
     def __init__(
-        self, fps: float, smoothing: float = 0.3, window_s: float = 0.4, frame_rate: float = 25.0
+        self,
+        fps: float,
+        smoothing: float = 0.3,
+        window_s: float = 0.4,
+        frame_rate: float = 25.0,
+        facing_s: float = 0.4,
+        rear: bool | None = None,
     ) -> None:
         self.fps = fps
         rate = fps if fps > 0 else frame_rate
@@ -140,10 +186,12 @@ class FactsTracker:
         self.smoothing = 1 - (1 - smoothing) ** (frame_rate / rate)
         self.window = max(3, round(window_s * rate))
         self._distances: dict[int, deque[float]] = {}
+        self.facing = Facing(max(3, round(facing_s * rate)), rear)
 
     def reset(self) -> None:
-        """Forget every track."""
+        """Forget every track, and the way the camera faces (a cut may be to another)."""
         self._distances.clear()
+        self.facing.reset()
 
     def update(
         self,
@@ -152,8 +200,11 @@ class FactsTracker:
         advance_m: float | None,
         geometry: RoadGeometry,
     ) -> FrameFacts:
-        """The facts of one frame's shown vehicles, lane and road motion."""
-        speed = advance_m * self.fps * 3.6 if advance_m is not None and advance_m > 0 else None
+        """The facts of one frame's shown vehicles, lane and road motion (`advance_m` signed:
+        towards the camera positive)."""
+        rear = self.facing.update(advance_m)
+        along = None if advance_m is None else -advance_m if rear else advance_m
+        speed = along * self.fps * 3.6 if along is not None and along > 0 else None
         found: list[VehicleFacts] = []
         if detections is not None and len(detections):
             boxes = detections.boxes
@@ -194,5 +245,5 @@ class FactsTracker:
             if ahead.closing_mps is not None and ahead.closing_mps > 0.3:
                 ttc = ahead.distance_m / ahead.closing_mps
         return FrameFacts(
-            speed, tuple(found), headway, ttc, ahead.id if ahead is not None else None
+            speed, tuple(found), headway, ttc, ahead.id if ahead is not None else None, rear
         )

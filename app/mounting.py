@@ -1,8 +1,8 @@
 """What the user says of how the camera is mounted, and the checks that it is a dashcam's.
 
 Each value takes the place of what the footage or the tuned camera would give; the CLI builds
-one `Mounting` from `--horizon`, `--camera-height`, `--traffic` and `--roll`, and the pipeline
-reads it (app/pipeline.py).
+one `Mounting` from `--horizon`, `--camera-height`, `--traffic`, `--roll` and `--facing`, and the
+pipeline reads it (app/pipeline.py).
 """
 
 from __future__ import annotations
@@ -19,12 +19,22 @@ class Mounting:
     the tuned camera would give: the horizon row (None: estimated from the footage), the height
     over the road in metres (None: a car's; sizes the vehicle windows), traffic keeping left
     (the vehicle stage sees every frame mirrored and its boxes come back mirrored,
-    app/traffic.py) and the picture's turn in degrees anticlockwise (levelled with the lens)."""
+    app/traffic.py), the picture's turn in degrees anticlockwise (levelled with the lens) and
+    whether the camera looks back (None: read from the road's motion, `app.facts.Facing`;
+    stated rear, the vehicle stage also sees the frames mirrored, since a rear camera sees the
+    road's sides swapped)."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None
     keep_left: bool = False
     roll_deg: float = 0.0
+    rear: bool | None = None
+
+    @property
+    def mirrored(self) -> bool:
+        """Whether the vehicle stage sees the frames mirrored: traffic keeping left seen ahead,
+        or traffic keeping right seen behind (either, as traffic keeping right seen ahead)."""
+        return self.keep_left != (self.rear is True)
 
 
 # Camera heights over the road a user may state, in metres (a car's bumper to a lorry's roof).

@@ -107,7 +107,8 @@ class Pipeline:
     forked worker process. A frame of another size raises `FrameSizeChanged`. Use it as a context
     manager, or call `close`, to stop the worker. The `mounting` the user states (`Mounting`)
     fixes the horizon, sizes the vehicle windows, mirrors the vehicle stage's frames for traffic
-    keeping left, and levels the undistorted frames of a turned camera.
+    keeping left (or right, seen by a rear camera), levels the undistorted frames of a turned
+    camera, and says whether the camera looks back.
 
     Where edited footage cuts to another shot (`camera_cal.ShotDetector`), the shot starts as a
     clip does: the stages forget their history, and the scene is measured afresh unless the
@@ -127,9 +128,10 @@ class Pipeline:
         self.mounting = mounting if mounting is not None else Mounting()
         self._car_scale = 1.0  # the vehicle windows' ground scale (see `prepare`)
         self.lanes = lanes
-        # Traffic keeping left: the vehicle stage sees the frames mirrored (see app/traffic.py).
+        # Traffic keeping left, or a rear camera's road: the vehicle stage sees the frames
+        # mirrored (see app/traffic.py).
         self.vehicles: VehicleDetector | KeepLeft | None = (
-            KeepLeft(vehicles) if self.mounting.keep_left and vehicles is not None else vehicles
+            KeepLeft(vehicles) if self.mounting.mirrored and vehicles is not None else vehicles
         )
         self.vehicles_in_worker = vehicles_in_worker and vehicles is not None
         self.size: tuple[int, int] | None = None
@@ -194,7 +196,7 @@ class Pipeline:
             1.0 if height is None else round(self._geometry.camera_height_m / height, 3)
         )
         self._scene = self._new_scene(size, fps)
-        self._facts = FactsTracker(fps)
+        self._facts = FactsTracker(fps, rear=self.mounting.rear)
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0
         self._vehicle_boxes.clear()
@@ -442,6 +444,7 @@ class Pipeline:
                     facts.headway_s if facts is not None else None,
                     facts.ttc_s if facts is not None else None,
                     facts.ahead_id if facts is not None else None,
+                    facts is not None and facts.rear,
                 )
             )
         self._frame += 1

@@ -87,6 +87,8 @@ def frame_record(
     if result.lane is not None:
         record["lane"] = lane_record(result.lane.lane)
         record["speed_kmh"] = _rounded(facts.speed_kmh, 1) if facts is not None else None
+        if facts is not None and facts.rear:
+            record["facing"] = "rear"
     return record
 
 

@@ -51,7 +51,10 @@ class Framing:
     is told so (`--traffic left`); `light`: every pixel value times this (0.4: dusk, the
     asphalt at about 30 grey levels); `roll`: last, the picture turned this many degrees
     anticlockwise about its centre, as by a camera mounted askew, and roadview told so
-    (`--roll`): its output is levelled back, so the labels stay where they are."""
+    (`--roll`): its output is levelled back, so the labels stay where they are; `reverse`: the
+    frames played backwards, the road moving away as a rear camera films it (with `mirror`, its
+    sides swapped too, as a rear camera sees them); `rear`: roadview is told so (`--facing
+    rear`)."""
 
     name: str
     crop: Box | None = None
@@ -62,6 +65,8 @@ class Framing:
     keep_left: bool = False
     light: float = 1.0
     roll: float = 0.0
+    reverse: bool = False
+    rear: bool = False
 
     @property
     def unchanged(self) -> bool:
@@ -74,11 +79,14 @@ class Framing:
             and not self.mirror
             and self.light == 1
             and self.roll == 0
+            and not self.reverse
         )
 
-    def source_frame(self, frame: int) -> int:
-        """The index of the source frame that the re-framed clip shows as its `frame`."""
-        return int(np.floor(frame / self.rate + 1e-9))
+    def source_frame(self, frame: int, source_frames: int) -> int:
+        """The index of the source frame that the re-framed copy of a clip of `source_frames`
+        shows as its `frame`."""
+        shown = int(np.floor(frame / self.rate + 1e-9))
+        return source_frames - 1 - shown if self.reverse else shown
 
     def frame_count(self, source_frames: int) -> int:
         """How many frames the re-framed copy of a clip of `source_frames` has."""
@@ -181,6 +189,14 @@ def dusk_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     )
 
 
+# A rear camera on a clip: played backwards and mirrored (the road moving away, its sides swapped
+# as a camera looking back sees them), read by roadview unaided and told `--facing rear`.
+REAR_FRAMINGS = (
+    Framing("rear camera (played backwards, mirrored)", reverse=True, mirror=True),
+    Framing("rear camera, --facing rear", reverse=True, mirror=True, rear=True),
+)
+
+
 def reframe_image(frame: Frame, framing: Framing) -> Frame:
     """The re-framed picture."""
     h, w = frame.shape[:2]
@@ -264,17 +280,23 @@ def write_reframed(
     info = probe_video(video)
     undistort = undistorter_for(calibration, info.size)
     size = framing.output_size(info.size)
-    shown = 0  # frames written so far
+    frames: Iterable[Frame] = read_frames(video, info)
+    count = info.n_frames
+    if framing.reverse:  # played backwards: the labelled clips are seconds long
+        held = list(frames)
+        frames, count = reversed(held), len(held)
     # ffmpeg converts the copies' RGB, as it did when the table was first measured: the table
     # is one draw of the encoder, and a conversion a grey level apart is another (README).
     with VideoSink(
         output, size, info.fps * framing.rate, preset=preset, ffmpeg_converts=True
     ) as sink:
-        for index, frame in enumerate(read_frames(video, info)):
-            if framing.source_frame(shown) != index:
+        shown = 0  # frames written so far
+        for played, frame in enumerate(frames):
+            index = count - 1 - played if framing.reverse else played
+            if framing.source_frame(shown, count) != index:
                 continue  # dropped at a lower frame rate
             picture = reframe_image(undistort(frame) if undistort else frame, framing)
-            while framing.source_frame(shown) == index:
+            while framing.source_frame(shown, count) == index:
                 sink.write(picture)
                 shown += 1
     return size
@@ -285,7 +307,8 @@ def retime_labels(
 ) -> dict[int, FrameLabels]:
     """Per-frame labels (of `load_labels`) of the re-framed copy's frames: each shows the labels
     of the source frame it shows."""
-    frames = (framing.source_frame(j) for j in range(framing.frame_count(source_frames)))
+    count = framing.frame_count(source_frames)
+    frames = (framing.source_frame(j, source_frames) for j in range(count))
     return {j: labels[i] for j, i in enumerate(frames) if i in labels}
 
 
@@ -314,7 +337,11 @@ def framing_scores(
         vehicles,
         record=record,
         vehicles_in_worker=False,
-        mounting=Mounting(keep_left=framing.keep_left, roll_deg=framing.roll),
+        mounting=Mounting(
+            keep_left=framing.keep_left,
+            roll_deg=framing.roll,
+            rear=True if framing.rear else None,
+        ),
     )
     truth = retime_labels(load_labels_document(document), framing, info.n_frames)
     frames = list(read_record(record))
@@ -335,7 +362,7 @@ def distance_ratios(
     by_frame = {int(r["frame"]): r for r in reference}
     ratios: list[float] = []
     for record in frames:
-        shown = framing.source_frame(int(record["frame"]))
+        shown = framing.source_frame(int(record["frame"]), len(reference))
         seen = list(by_frame.get(shown, {}).get("vehicles", []))
         framed = [v for v in record.get("vehicles", []) if v.get("distance_m")]
         if not seen or not framed:
@@ -358,7 +385,7 @@ def speed_ratios(
     speeds = {int(r["frame"]): r.get("speed_kmh") for r in reference}
     ratios = []
     for record in frames:
-        seen = speeds.get(framing.source_frame(int(record["frame"])))
+        seen = speeds.get(framing.source_frame(int(record["frame"]), len(reference)))
         if seen and record.get("speed_kmh"):
             ratios.append(record["speed_kmh"] / seen)
     return np.asarray(ratios, np.float64)

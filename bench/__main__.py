@@ -24,6 +24,7 @@ from app.mining import dimmed_copy, grainy
 from app.pipeline import Pipeline
 from app.record import read_record
 from app.reframe import (
+    REAR_FRAMINGS,
     Framing,
     dusk_framings,
     framing_table,
@@ -391,7 +392,12 @@ def main() -> None:
     # A portrait picture is measured too, but is no part of the tested aims: its lane starts
     # later (README).
     source = probe_video(clips[0][0]).size
-    framings = [*standard_framings(source), upright_framing(source), *dusk_framings(source)]
+    framings = [
+        *standard_framings(source),
+        upright_framing(source),
+        *dusk_framings(source),
+        *REAR_FRAMINGS,
+    ]
     report["framings"] = framing_table(clips, calibration, framings)
     # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to
     # keep in view how blocky compression still fools the classifier.

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pyarrow.compute as pc
 import pyarrow.dataset as ds
@@ -96,6 +97,7 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
     for column in ("road_grey", "horizon_y", "ground_scale"):
         values = [f[column] for f in frames if f["video"] == "sub/project_cut_2.mp4"]
         assert values == [r[column] for r in lines], column
+    assert not any(f["rear"] for f in frames)  # front cameras all
     assert {v["lane"] for v in vehicles} <= {"ego", "left", "right", "other"}
     events = ds.dataset(out / "table" / "events").to_table()
     assert events.num_rows == 0 and "vehicle_id" in events.column_names
@@ -238,6 +240,16 @@ def test_events_table_holds_each_event(tmp_path: Path) -> None:
     write_table_parts(tmp_path, "k", "a/b.mp4", [], [event_record(event)])
     (row,) = pq.read_table(tmp_path / "events").to_pylist()
     assert row == {"video": "a/b.mp4"} | event_record(event)
+
+
+def test_frames_table_says_which_frames_a_rear_camera_saw(tmp_path: Path) -> None:
+    from app.batch import write_table_parts
+
+    lines: list[dict[str, Any]] = [{"frame": k, "time_s": k / 25, "lane": None} for k in range(3)]
+    lines[2]["facing"] = "rear"  # the record says so once the road is seen moving away
+    write_table_parts(tmp_path, "k", "rear.mp4", lines)
+    rows = pq.read_table(tmp_path / "frames").to_pylist()
+    assert [r["rear"] for r in rows] == [False, False, True]
 
 
 def test_a_clip_of_another_camera_is_done_without_undistortion(

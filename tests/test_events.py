@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 
 from app.annotators import BANNER, compose, default_annotators
 from app.events import (
+    KIND_TITLES,
     Event,
     EventDetector,
     FrameSignals,
@@ -150,6 +152,23 @@ def test_closing_fast_and_a_new_vehicle_ahead() -> None:
     ]
 
 
+def test_a_rear_camera_is_followed_closely_and_sees_the_sides_swapped() -> None:
+    """Seen by a rear camera, the vehicle in our lane is behind us: a short headway is being
+    followed closely, a short time to collision one closing fast from behind, and the picture's
+    left is the car's right."""
+
+    def behind(frames: list[FrameSignals]) -> list[str]:
+        return [e.kind for e in find_events([replace(s, rear=True) for s in frames])]
+
+    assert behind(_series(headways=[0.8] * 60 + [2.0] * 20)) == ["followed_closely"]
+    assert behind(_series(ttcs=[2.5] * 10 + [6.0] * 30)) == ["closing_fast_behind"]
+    assert KIND_TITLES["closing_fast_behind"] == "closing fast from behind"
+    offsets: list[float | None] = [*_ramp((0.0, 1.8, 1.5)), *[None] * 5]
+    offsets += [-v for v in _ramp((1.7, 0.0, 1.5), (0.0, 0.0, 1.0))]
+    assert [e.kind for e in find_events(_series(offsets))] == ["lane_change_right"]
+    assert behind(_series(offsets)) == ["lane_change_left"]
+
+
 def test_events_round_trip_and_signals_from_a_record_line() -> None:
     event = Event("close_following", 10, 84, 0.4, 3.36, 7, 0.7)
     assert event_from_record(json.loads(json.dumps(event_record(event)))) == event
@@ -166,6 +185,7 @@ def test_events_round_trip_and_signals_from_a_record_line() -> None:
         ],
     }
     assert signals_from_record(row) == FrameSignals(3, 0.12, 0.4, 3.5, 0.9, None, 5)
+    assert signals_from_record({**row, "facing": "rear"}).rear
 
 
 def test_the_banner_shows_events_under_way() -> None:

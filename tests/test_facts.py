@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.facts import FactsTracker, RoadGeometry, lane_of
+from app.facts import Facing, FactsTracker, RoadGeometry, lane_of
 from app.reframe import Framing, write_reframed
 from app.sources import probe_video, read_frames
 from camera_cal import build_undistorter, default_calibration_path, load_calibration
@@ -318,6 +318,31 @@ def test_headway_and_time_to_collision_for_a_car_ahead() -> None:
         lane_of(3.7, 20.0, None, geometry) == "right"
         and lane_of(-8.0, 20.0, None, geometry) == "other"
     )
+
+
+def test_a_road_moving_away_is_a_rear_camera_and_gives_the_speed() -> None:
+    """The road coming towards the camera gives the speed at once; moving away (a rear camera)
+    once it has for 0.4 s and more often than towards it. A front camera's odd backward reading
+    (a car reversing) reads no speed, as a rear camera's odd forward one does."""
+    view, _, _, _ = _pinhole_view()
+    geometry = RoadGeometry.of(view)
+    front = FactsTracker(fps=25.0)
+    speeds = [front.update(None, None, a, geometry).speed_kmh for a in [1.0] * 20 + [-1.0] * 5]
+    assert speeds[:20] == [pytest.approx(90.0)] * 20 and speeds[20:] == [None] * 5
+    assert not front.facing.rear
+    rear = FactsTracker(fps=25.0)
+    facts = [rear.update(None, None, a, geometry) for a in [-1.0] * 20 + [1.0] * 3]
+    assert [f.speed_kmh for f in facts[:9]] == [None] * 9  # not yet told from reversing
+    assert all(f.rear and f.speed_kmh == pytest.approx(90.0) for f in facts[9:20])
+    assert [f.speed_kmh for f in facts[20:]] == [None] * 3
+    rear.reset()  # a cut: perhaps to the front camera
+    assert not rear.update(None, None, 1.0, geometry).rear
+    # Unmeasured frames count neither way; the way read most wins.
+    facing = Facing(least=3)
+    assert [facing.update(a) for a in (None, -0.5, None, -0.5, 0.4, -0.5)] == [
+        False, False, False, False, False, True
+    ]  # fmt: skip
+    assert not [facing.update(0.4) for _ in range(3)][-1]
 
 
 def test_facts_in_the_record_follow_the_schema(test_video: Path, tmp_path: Path) -> None:

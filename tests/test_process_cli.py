@@ -305,3 +305,64 @@ def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: 
     out = tmp_path / "x.mp4"
     assert_one_line_error(run_cli("process", clip, "-o", out, "--roll", "90"), "--roll 90")
     assert not out.exists()
+
+
+
+@pytest.fixture(scope="module")
+def rear_copies(data_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """project_cut_2 undistorted as it is, and played backwards and mirrored: the road moving
+    away with its sides swapped, as a rear camera films it."""
+    from app.reframe import Framing, write_reframed
+    from camera_cal import default_calibration_path, load_calibration
+
+    folder = tmp_path_factory.mktemp("rear")
+    calibration = load_calibration(default_calibration_path())
+    video = data_dir / "videos" / "project_cut_2.mp4"
+    copies = {"ahead": folder / "ahead.mp4", "rear": folder / "rear.mp4"}
+    write_reframed(video, Framing("as is"), copies["ahead"], calibration)
+    write_reframed(video, Framing("rear", reverse=True, mirror=True), copies["rear"], calibration)
+    return copies
+
+
+def _run(video: Path, folder: Path, *options: str) -> tuple[list[dict[str, Any]], str]:
+    """`process` run without a calibration or vehicles: its record and what it said."""
+    record = folder / f"{video.stem}{len(options)}.jsonl"
+    result = run_cli(
+        "process", video, "-o", folder / "o.mp4", "--json", record, "--calibration", "none",
+        "--no-vehicles", *options,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    return read_record(record), result.stdout + result.stderr
+
+
+def test_a_rear_cameras_footage_reads_the_speed_of_the_road_moving_away(
+    rear_copies: dict[str, Path], tmp_path: Path
+) -> None:
+    """Played backwards, the road moves away from the camera as from a rear one: after 0.4 s
+    the record says so (`facing`), the speed is the road's, as at the same moment ahead, and
+    `process` tells the user how to state it. Stated (`--facing rear`), it is so from the start
+    and nothing needs saying; a way no camera looks is refused in one line. (The copy starts on
+    the pale concrete the clip ends on: its first horizon stands at frame 10, where it took 39
+    before edges were looked for at 0.6 of their strength; see test_scene.)"""
+    ahead, _ = _run(rear_copies["ahead"], tmp_path)
+    rows, said = _run(rear_copies["rear"], tmp_path)
+    assert next(r["frame"] for r in rows if r["vanishing_x"] is not None) <= 15
+    assert not any("facing" in r for r in ahead), "a front camera read as a rear one"
+    facing = [r["frame"] for r in rows if r.get("facing") == "rear"]
+    assert facing and facing[0] <= 20 and facing == list(range(facing[0], len(rows)))
+    count = len(ahead)
+    ratios = [
+        r["speed_kmh"] / ahead[count - 1 - r["frame"]]["speed_kmh"]
+        for r in rows
+        if r.get("speed_kmh") and ahead[count - 1 - r["frame"]].get("speed_kmh")
+    ]
+    assert len(ratios) >= count - 25 and abs(float(np.median(ratios)) - 1) < 0.05, ratios
+    assert "rear camera" in said and "--facing rear" in said, said
+    stated, said = _run(rear_copies["rear"], tmp_path, "--facing", "rear")
+    assert all(r.get("facing") == "rear" for r in stated)
+    # Its speed as soon as the road's motion is read: 0.4 s sooner.
+    first = next(r["frame"] for r in rows if r.get("speed_kmh"))
+    assert next(r["frame"] for r in stated if r.get("speed_kmh")) <= first - 5
+    assert "rear camera" not in said
+    bad = run_cli("process", rear_copies["rear"], "-o", tmp_path / "x.mp4", "--facing", "up")
+    assert_one_line_error(bad, "--facing up")
