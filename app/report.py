@@ -63,6 +63,12 @@ def _curvature(row: Mapping[str, Any]) -> float:
     return 0.0 if radius is None else 1000.0 / float(radius)
 
 
+def _where(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Where the vehicle in our lane is: 'ahead', or 'behind' in a rear camera's record (its
+    `facing`; see app/events.py)."""
+    return "behind" if any(r.get("facing") == "rear" for r in rows) else "ahead"
+
+
 def record_series(rows: Sequence[Mapping[str, Any]]) -> tuple[NDArray[np.float64], list[Series]]:
     """Times and the plotted quantities of a record; a stage that did not run has no plot."""
     times = np.array([float(r["time_s"]) for r in rows])
@@ -89,7 +95,7 @@ def record_series(rows: Sequence[Mapping[str, Any]]) -> tuple[NDArray[np.float64
         series.append(
             Series(
                 "distance",
-                "Distance to the vehicle ahead",
+                f"Distance to the vehicle {_where(rows)}",
                 "m",
                 np.array([_ahead_distance(r) for r in rows]),
             )
@@ -269,7 +275,7 @@ def report_html(
         lane = np.isfinite(by_key["offset"].values)
         facts.append(f"<li>Lane found in {100 * lane.mean():.0f} % of frames</li>")
     if "distance" in by_key:
-        facts.append(_stat(by_key["distance"].values, "Vehicle ahead", "m", 1))
+        facts.append(_stat(by_key["distance"].values, f"Vehicle {_where(rows)}", "m", 1))
     facts.append(f"<li>{len(events)} events ({html.escape(events_source)})</li>")
     event_rows = []
     for k, event in enumerate(events):

@@ -80,6 +80,11 @@ def test_plots_follow_the_record_with_gaps_where_nothing_was_measured() -> None:
     page = report_html("t", _rows(), [event], {}, "test")
     assert page.count('class="span"') == 5  # the event shaded on every plot
     assert "close following" in page and "no video given" in page
+    # A rear camera's record: the vehicle in our lane is behind us.
+    rear = [{**r, "facing": "rear"} for r in _rows()]
+    page = report_html("t", rear, [], {}, "test")
+    assert "Distance to the vehicle behind" in page and "Vehicle behind" in page
+    assert "vehicle ahead" not in page.lower()
 
 
 class _Resources(html.parser.HTMLParser):
