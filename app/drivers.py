@@ -65,7 +65,7 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
     return first, last
 
 
-# Told when a video has no colour: the vehicle classifier learned colour footage (README).
+# Told when the road moves away from an unstated camera: it looks back (README, A rear camera).
 REAR_NOTE = (
     "a rear camera's footage (the road moves away from it; or it plays backwards): its speed is "
     "read so, and the headway, time to collision and events are of the vehicle behind in our "
@@ -73,6 +73,7 @@ REAR_NOTE = (
     "search also sees the road's sides swapped, as a camera looking back does (the classifier "
     "learned mostly cars' rears and finds fewer of the fronts that follow)"
 )
+# Told when a video has no colour: the vehicle classifier learned colour footage (README).
 MONOCHROME_NOTE = (
     "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
     "(README, Known weaknesses); the lanes are unaffected"
