@@ -185,12 +185,13 @@ def process_video(
         # camera starting up shows none at first.
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         scales: list[float] = []  # the lanes' ground scale at each frame
-        rear = False  # the road seen moving away: a rear camera's footage
+        rear = False  # the road read as moving away, as of the last frame: a rear camera's
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
             if out.result.scene is not None:
                 scales.append(out.result.scene.ground_scale)
-            rear = rear or (out.result.facts is not None and out.result.facts.rear)
+            if out.result.facts is not None:
+                rear = out.result.facts.rear
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:

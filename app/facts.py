@@ -129,11 +129,15 @@ class Facing:
     towards a front camera and moves away from a rear one (a dual-channel dashcam's rear file,
     or footage played backwards). Rear once at least `least` frames' advances moved away and
     they outnumber those that came towards it; the shared and wild clips' road never read as
-    moving away, in any frame (README). A `stated` facing (True: rear) is taken as it is."""
+    moving away, in any frame (README). Only advances of at least `min_advance_m` count: a car
+    reversing (out of a parking space, as a dashcam's first seconds often show) moves slowly,
+    and a rear camera sees the road move away at driving speeds. A `stated` facing (True:
+    rear) is taken as it is."""
 
-    def __init__(self, least: int, stated: bool | None = None) -> None:
+    def __init__(self, least: int, stated: bool | None = None, min_advance_m: float = 0.0) -> None:
         self.least = least
         self.stated = stated
+        self.min_advance_m = min_advance_m
         self._towards = 0
         self._away = 0
 
@@ -144,9 +148,9 @@ class Facing:
     def update(self, advance_m: float | None) -> bool:
         """Take in one frame's signed advance (None: not measured); whether the camera faces
         backwards."""
-        if advance_m is not None and advance_m > 0:
+        if advance_m is not None and advance_m > 0 and advance_m >= self.min_advance_m:
             self._towards += 1
-        elif advance_m is not None and advance_m < 0:
+        elif advance_m is not None and advance_m < 0 and -advance_m >= self.min_advance_m:
             self._away += 1
         return self.rear
 
@@ -166,8 +170,8 @@ class FactsTracker:
     `frame_rate`, so that the same time is averaged at any `fps`) and the closing speed is the
     slope of the smoothed distance over the last `window_s` seconds (at least 3 frames). Our
     speed is the road's advance towards a front camera, or away from a rear one once `Facing`
-    read it so over `facing_s` seconds or the user `rear` said so (before, and against the
-    facing, it is not known).
+    read it so over `facing_s` seconds at `facing_kmh` or more, or the user `rear` said so
+    (before, and against the facing, it is not known).
     """
 
     def __init__(
@@ -178,6 +182,7 @@ class FactsTracker:
         frame_rate: float = 25.0,
         facing_s: float = 0.4,
         rear: bool | None = None,
+        facing_kmh: float = 15.0,
     ) -> None:
         self.fps = fps
         rate = fps if fps > 0 else frame_rate
@@ -186,7 +191,7 @@ class FactsTracker:
         self.smoothing = 1 - (1 - smoothing) ** (frame_rate / rate)
         self.window = max(3, round(window_s * rate))
         self._distances: dict[int, deque[float]] = {}
-        self.facing = Facing(max(3, round(facing_s * rate)), rear)
+        self.facing = Facing(max(3, round(facing_s * rate)), rear, facing_kmh / 3.6 / rate)
 
     def reset(self) -> None:
         """Forget every track, and the way the camera faces (a cut may be to another)."""

@@ -337,6 +337,11 @@ def test_a_road_moving_away_is_a_rear_camera_and_gives_the_speed() -> None:
     assert [f.speed_kmh for f in facts[20:]] == [None] * 3
     rear.reset()  # a cut: perhaps to the front camera
     assert not rear.update(None, None, 1.0, geometry).rear
+    # A front camera's first seconds reversing out of a parking space (8 km/h), then driving:
+    # never a rear camera, and no speed while reversing.
+    parking = FactsTracker(fps=25.0)
+    facts = [parking.update(None, None, a, geometry) for a in [-0.09] * 75 + [1.0] * 25]
+    assert not any(f.rear for f in facts) and all(f.speed_kmh is None for f in facts[:75])
     # Unmeasured frames count neither way; the way read most wins.
     facing = Facing(least=3)
     assert [facing.update(a) for a in (None, -0.5, None, -0.5, 0.4, -0.5)] == [
