@@ -239,7 +239,7 @@ FRAME_COLUMNS = (
     ("grain", "double"),
     ("horizon_y", "double"),
     ("ground_scale", "double"),
-    ("rear", "bool"),
+    ("rear", "bool"),  # a rear camera's frame (the record's facing)
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -296,7 +296,7 @@ def write_table_parts(
             "grain": r.get("grain"),
             "horizon_y": r.get("horizon_y"),
             "ground_scale": r.get("ground_scale"),
-            "rear": r.get("facing") == "rear",
+            "rear": r.get("facing") in ("rear", "rear-mirrored"),
         }
         for r in rows
     ]

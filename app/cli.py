@@ -106,21 +106,20 @@ FacingOption = Annotated[
     str,
     typer.Option(
         "--facing",
-        metavar="auto|front|rear",
-        help="Which way the camera looks: 'rear' for a dual-channel dashcam's rear file (the "
-        "speed is read from the road moving away, the vehicle search sees the road's sides "
-        "swapped, the vehicle in our lane is the one behind); 'auto' reads it from the road's "
-        "motion, but searches vehicles as for a front camera.",
+        metavar="auto|front|rear|rear-mirrored",
+        help="Which way the camera looks: 'rear' for a dual-channel dashcam's rear file as its "
+        "lens sees the road (the speed is read from the road moving away, the vehicle in our "
+        "lane is the one behind, the vehicle search sees the road's sides swapped), "
+        "'rear-mirrored' for one saved mirrored, as a rear-view mirror shows it (its writing "
+        "reads backwards); 'auto' reads a rear camera from the road's motion but searches "
+        "vehicles as for a front camera.",
     ),
 ]
 
 
-def _rear(facing: str) -> bool | None:
-    """Whether `--facing` says the camera looks back (None: auto); anything else is refused."""
-    way = facing.strip().lower()
-    if way not in ("auto", "front", "rear"):
-        raise InputError(f"--facing {facing} is not a way a camera looks; give auto, front or rear")
-    return None if way == "auto" else way == "rear"
+def _facing(facing: str) -> str:
+    """The `--facing` value in lower case (checked with the rest of the mounting)."""
+    return facing.strip().lower()
 
 
 def _max_size(pixels: int) -> int:
@@ -320,7 +319,7 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
-    mounting = Mounting(horizon, camera_height, _keep_left(traffic), roll, _rear(facing))
+    mounting = Mounting(horizon, camera_height, _keep_left(traffic), roll, _facing(facing))
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
@@ -397,7 +396,7 @@ def batch_command(
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
 
-    mounting = Mounting(None, camera_height, _keep_left(traffic), roll, _rear(facing))
+    mounting = Mounting(None, camera_height, _keep_left(traffic), roll, _facing(facing))
     check_mounting(mounting)
     entries = find_inputs(inputs)
     if not entries:
@@ -453,7 +452,7 @@ def debug_command(
     pipeline = Pipeline(
         cal,
         *stages,
-        mounting=Mounting(horizon, camera_height, _keep_left(traffic), roll, _rear(facing)),
+        mounting=Mounting(horizon, camera_height, _keep_left(traffic), roll, _facing(facing)),
     )
     written = run_debug(
         source,

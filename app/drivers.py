@@ -70,8 +70,10 @@ REAR_NOTE = (
     "a rear camera's footage (the road moves away from it; or it plays backwards): its speed is "
     "read so, and the headway, time to collision and events are of the vehicle behind in our "
     "lane (followed closely, closing fast from behind); pass --facing rear so that the vehicle "
-    "search also sees the road's sides swapped, as a camera looking back does (the classifier "
-    "learned mostly cars' rears and finds fewer of the fronts that follow)"
+    "search also sees the road's sides swapped, as a camera looking back does, or --facing "
+    "rear-mirrored if the file is saved mirrored, as a rear-view mirror shows the road (its "
+    "writing reads backwards) (the classifier learned mostly cars' rears and finds fewer of "
+    "the fronts that follow)"
 )
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
 MONOCHROME_NOTE = (

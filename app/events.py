@@ -1,7 +1,7 @@
 """Driving events from the per-frame facts: lane departure, lane change, close following and
 closing fast, with hysteresis so that they do not flicker. Seen by a rear camera, the vehicle
 in our lane is the one behind: following closely and closing fast are then its, and the
-picture's sides are the car's swapped.
+picture's sides are the car's swapped (unless its file is saved mirrored).
 
 The detector reads plain numbers per frame (`FrameSignals`), so it runs the same beside the
 pipeline (for the video's banner and `--events`) and over a saved record (`roadview report`).
@@ -25,14 +25,11 @@ KIND_TITLES = {
     "followed_closely": "followed closely",
     "closing_fast_behind": "closing fast from behind",
 }
-# What each kind is when a rear camera sees it: the vehicle in our lane follows us, and the
-# picture's left is the car's right (a rear camera's file as its lens sees the road).
-REAR_KINDS = {
-    "close_following": "followed_closely",
-    "closing_fast": "closing_fast_behind",
-    "lane_change_left": "lane_change_right",
-    "lane_change_right": "lane_change_left",
-}
+# What each kind is when a rear camera sees it: the vehicle in our lane follows us ...
+REAR_KINDS = {"close_following": "followed_closely", "closing_fast": "closing_fast_behind"}
+# ... and, in its file as its lens sees the road (not saved mirrored), the picture's left is
+# the car's right.
+SWAPPED_SIDES = {"lane_change_left": "lane_change_right", "lane_change_right": "lane_change_left"}
 
 
 @dataclass(frozen=True)
@@ -66,6 +63,7 @@ class FrameSignals:
     ttc_s: float | None = None
     ahead_id: int | None = None  # the vehicle ahead in our lane
     rear: bool = False  # seen by a rear camera: that vehicle is behind us
+    mirrored: bool = False  # ... whose file is saved mirrored: the picture's sides are the car's
 
 
 @dataclass(frozen=True)
@@ -283,7 +281,7 @@ class EventDetector:
             "closing_fast", cfg.ttc_s, cfg.ttc_exit_s, cfg.closing_hold_s, cfg.release_s
         )
         self.events: list[Event] = []  # every event that ended, in the order they ended
-        self._rear = False  # the last frame was a rear camera's
+        self._kinds: dict[str, str] = {}  # kinds as the last frame's camera sees them
 
     def reset(self) -> None:
         """Forget everything: a new clip."""
@@ -291,15 +289,16 @@ class EventDetector:
         self._following.reset()
         self._closing.reset()
         self.events.clear()
-        self._rear = False
+        self._kinds = {}
 
     def _seen(self, event: Event) -> Event:
-        """The event as the camera's facing makes it (see `REAR_KINDS`)."""
-        return replace(event, kind=REAR_KINDS.get(event.kind, event.kind)) if self._rear else event
+        """The event as the camera's facing makes it (see `REAR_KINDS`, `SWAPPED_SIDES`)."""
+        kind = self._kinds.get(event.kind, event.kind)
+        return replace(event, kind=kind) if kind != event.kind else event
 
     def update(self, s: FrameSignals) -> tuple[Event, ...]:
         """Feed one frame; returns the events under way at it."""
-        self._rear = s.rear
+        self._kinds = {**REAR_KINDS, **({} if s.mirrored else SWAPPED_SIDES)} if s.rear else {}
         for ended in (
             self._excursion.update(s),
             self._following.update(s, s.headway_s),
@@ -360,5 +359,6 @@ def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
         row.get("headway_s"),
         row.get("ttc_s"),
         int(nearest["id"]) if nearest is not None else None,
-        row.get("facing") == "rear",
+        row.get("facing") in ("rear", "rear-mirrored"),
+        row.get("facing") == "rear-mirrored",
     )

@@ -120,8 +120,10 @@ class FrameFacts:
     headway_s: float | None = None  # to the nearest vehicle ahead in our lane
     ttc_s: float | None = None  # to it, while it closes in
     ahead_id: int | None = None  # that vehicle
-    # A rear camera (the road moves away): "ahead" is then behind us, the vehicle following.
+    # A rear camera (the road moves away): "ahead" is then behind us, the vehicle following;
+    # `mirrored`: its file saved mirrored, as a rear-view mirror shows the road (stated only).
     rear: bool = False
+    mirrored: bool = False
 
 
 class Facing:
@@ -171,7 +173,8 @@ class FactsTracker:
     slope of the smoothed distance over the last `window_s` seconds (at least 3 frames). Our
     speed is the road's advance towards a front camera, or away from a rear one once `Facing`
     read it so over `facing_s` seconds at `facing_kmh` or more, or the user `rear` said so
-    (before, and against the facing, it is not known).
+    (before, and against the facing, it is not known); `mirrored`: the user said the rear
+    camera's file is saved mirrored.
     """
 
     def __init__(
@@ -183,6 +186,7 @@ class FactsTracker:
         facing_s: float = 0.4,
         rear: bool | None = None,
         facing_kmh: float = 15.0,
+        mirrored: bool = False,
     ) -> None:
         self.fps = fps
         rate = fps if fps > 0 else frame_rate
@@ -192,6 +196,7 @@ class FactsTracker:
         self.window = max(3, round(window_s * rate))
         self._distances: dict[int, deque[float]] = {}
         self.facing = Facing(max(3, round(facing_s * rate)), rear, facing_kmh / 3.6 / rate)
+        self.mirrored = mirrored
 
     def reset(self) -> None:
         """Forget every track, and the way the camera faces (a cut may be to another)."""
@@ -250,5 +255,11 @@ class FactsTracker:
             if ahead.closing_mps is not None and ahead.closing_mps > 0.3:
                 ttc = ahead.distance_m / ahead.closing_mps
         return FrameFacts(
-            speed, tuple(found), headway, ttc, ahead.id if ahead is not None else None, rear
+            speed,
+            tuple(found),
+            headway,
+            ttc,
+            ahead.id if ahead is not None else None,
+            rear,
+            rear and self.mirrored,
         )

@@ -20,21 +20,41 @@ class Mounting:
     over the road in metres (None: a car's; sizes the vehicle windows), traffic keeping left
     (the vehicle stage sees every frame mirrored and its boxes come back mirrored,
     app/traffic.py), the picture's turn in degrees anticlockwise (levelled with the lens) and
-    whether the camera looks back (None: read from the road's motion, `app.facts.Facing`;
-    stated rear, the vehicle stage also sees the frames mirrored, since a rear camera sees the
-    road's sides swapped)."""
+    which way the camera looks (`FACINGS`: "auto" reads it from the road's motion,
+    `app.facts.Facing`; "rear" is a rear camera's file as its lens sees the road, its sides
+    swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one saved mirrored,
+    as a rear-view mirror shows the road, its writing backwards and its sides as ahead)."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None
     keep_left: bool = False
     roll_deg: float = 0.0
-    rear: bool | None = None
+    facing: str = "auto"
+
+    @property
+    def rear(self) -> bool | None:
+        """Whether the user says the camera looks back (None: not said)."""
+        return None if self.facing == "auto" else self.facing != "front"
 
     @property
     def mirrored(self) -> bool:
         """Whether the vehicle stage sees the frames mirrored: traffic keeping left seen ahead,
         or traffic keeping right seen behind (either, as traffic keeping right seen ahead)."""
-        return self.keep_left != (self.rear is True)
+        return self.keep_left != (self.facing == "rear")
+
+
+# Which way a camera may look: read from the road's motion, ahead, back (the file as the lens
+# sees the road), back saved mirrored (as a rear-view mirror shows it).
+FACINGS = ("auto", "front", "rear", "rear-mirrored")
+
+
+def check_facing(facing: str) -> None:
+    """A user's facing must be one of `FACINGS`."""
+    if facing not in FACINGS:
+        raise InputError(
+            f"--facing {facing} is not a way a camera looks; give {', '.join(FACINGS[:-1])} or "
+            f"{FACINGS[-1]}"
+        )
 
 
 # Camera heights over the road a user may state, in metres (a car's bumper to a lorry's roof).
@@ -102,6 +122,7 @@ def check_mounting(mounting: Mounting, size: tuple[int, int] | None = None) -> N
         check_horizon(mounting.horizon_y, size)
     check_camera_height(mounting.camera_height_m)
     check_roll(mounting.roll_deg)
+    check_facing(mounting.facing)
 
 
 def video_mounting(mounting: Mounting, info: VideoInfo) -> Mounting:

@@ -196,7 +196,9 @@ class Pipeline:
             1.0 if height is None else round(self._geometry.camera_height_m / height, 3)
         )
         self._scene = self._new_scene(size, fps)
-        self._facts = FactsTracker(fps, rear=self.mounting.rear)
+        self._facts = FactsTracker(
+            fps, rear=self.mounting.rear, mirrored=self.mounting.facing == "rear-mirrored"
+        )
         self._events.reset()
         self._fps, self._frame, self._started = fps, first_frame, 0
         self._vehicle_boxes.clear()
@@ -445,6 +447,7 @@ class Pipeline:
                     facts.ttc_s if facts is not None else None,
                     facts.ahead_id if facts is not None else None,
                     facts is not None and facts.rear,
+                    facts is not None and facts.mirrored,
                 )
             )
         self._frame += 1

@@ -88,7 +88,7 @@ def frame_record(
         record["lane"] = lane_record(result.lane.lane)
         record["speed_kmh"] = _rounded(facts.speed_kmh, 1) if facts is not None else None
         if facts is not None and facts.rear:
-            record["facing"] = "rear"
+            record["facing"] = "rear-mirrored" if facts.mirrored else "rear"
     return record
 
 

@@ -53,8 +53,8 @@ class Framing:
     anticlockwise about its centre, as by a camera mounted askew, and roadview told so
     (`--roll`): its output is levelled back, so the labels stay where they are; `reverse`: the
     frames played backwards, the road moving away as a rear camera films it (with `mirror`, its
-    sides swapped too, as a rear camera sees them); `rear`: roadview is told so (`--facing
-    rear`)."""
+    sides swapped too, as a rear camera's lens sees them; without, as its file saved mirrored
+    shows them); `facing`: what roadview is told of that (`--facing`)."""
 
     name: str
     crop: Box | None = None
@@ -66,7 +66,7 @@ class Framing:
     light: float = 1.0
     roll: float = 0.0
     reverse: bool = False
-    rear: bool = False
+    facing: str = "auto"
 
     @property
     def unchanged(self) -> bool:
@@ -190,10 +190,16 @@ def dusk_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
 
 
 # A rear camera on a clip: played backwards and mirrored (the road moving away, its sides swapped
-# as a camera looking back sees them), read by roadview unaided and told `--facing rear`.
+# as a camera looking back sees them), read by roadview unaided and told `--facing rear`; and a
+# rear camera's file saved mirrored (as a rear-view mirror shows the road: played backwards
+# alone), unaided and told `--facing rear-mirrored`.
 REAR_FRAMINGS = (
     Framing("rear camera (played backwards, mirrored)", reverse=True, mirror=True),
-    Framing("rear camera, --facing rear", reverse=True, mirror=True, rear=True),
+    Framing("rear camera, --facing rear", reverse=True, mirror=True, facing="rear"),
+    Framing("rear camera saved mirrored (played backwards)", reverse=True),
+    Framing(
+        "rear camera saved mirrored, --facing rear-mirrored", reverse=True, facing="rear-mirrored"
+    ),
 )
 
 
@@ -340,7 +346,7 @@ def framing_scores(
         mounting=Mounting(
             keep_left=framing.keep_left,
             roll_deg=framing.roll,
-            rear=True if framing.rear else None,
+            facing=framing.facing,
         ),
     )
     truth = retime_labels(load_labels_document(document), framing, info.n_frames)

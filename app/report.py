@@ -66,7 +66,7 @@ def _curvature(row: Mapping[str, Any]) -> float:
 def _where(rows: Sequence[Mapping[str, Any]]) -> str:
     """Where the vehicle in our lane is: 'ahead', or 'behind' in a rear camera's record (its
     `facing`; see app/events.py)."""
-    return "behind" if any(r.get("facing") == "rear" for r in rows) else "ahead"
+    return "behind" if any(r.get("facing") in ("rear", "rear-mirrored") for r in rows) else "ahead"
 
 
 def record_series(rows: Sequence[Mapping[str, Any]]) -> tuple[NDArray[np.float64], list[Series]]:

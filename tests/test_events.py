@@ -155,10 +155,12 @@ def test_closing_fast_and_a_new_vehicle_ahead() -> None:
 def test_a_rear_camera_is_followed_closely_and_sees_the_sides_swapped() -> None:
     """Seen by a rear camera, the vehicle in our lane is behind us: a short headway is being
     followed closely, a short time to collision one closing fast from behind, and the picture's
-    left is the car's right."""
+    left is the car's right, unless the file is saved mirrored (as a rear-view mirror shows
+    the road)."""
 
-    def behind(frames: list[FrameSignals]) -> list[str]:
-        return [e.kind for e in find_events([replace(s, rear=True) for s in frames])]
+    def behind(frames: list[FrameSignals], mirrored: bool = False) -> list[str]:
+        seen = [replace(s, rear=True, mirrored=mirrored) for s in frames]
+        return [e.kind for e in find_events(seen)]
 
     assert behind(_series(headways=[0.8] * 60 + [2.0] * 20)) == ["followed_closely"]
     assert behind(_series(ttcs=[2.5] * 10 + [6.0] * 30)) == ["closing_fast_behind"]
@@ -167,6 +169,8 @@ def test_a_rear_camera_is_followed_closely_and_sees_the_sides_swapped() -> None:
     offsets += [-v for v in _ramp((1.7, 0.0, 1.5), (0.0, 0.0, 1.0))]
     assert [e.kind for e in find_events(_series(offsets))] == ["lane_change_right"]
     assert behind(_series(offsets)) == ["lane_change_left"]
+    assert behind(_series(offsets), mirrored=True) == ["lane_change_right"]
+    assert behind(_series(headways=[0.8] * 60), mirrored=True) == ["followed_closely"]
 
 
 def test_events_round_trip_and_signals_from_a_record_line() -> None:
@@ -185,7 +189,9 @@ def test_events_round_trip_and_signals_from_a_record_line() -> None:
         ],
     }
     assert signals_from_record(row) == FrameSignals(3, 0.12, 0.4, 3.5, 0.9, None, 5)
-    assert signals_from_record({**row, "facing": "rear"}).rear
+    rear = signals_from_record({**row, "facing": "rear"})
+    assert rear.rear and not rear.mirrored
+    assert signals_from_record({**row, "facing": "rear-mirrored"}).mirrored
 
 
 def test_the_banner_shows_events_under_way() -> None:

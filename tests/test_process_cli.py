@@ -364,5 +364,7 @@ def test_a_rear_cameras_footage_reads_the_speed_of_the_road_moving_away(
     first = next(r["frame"] for r in rows if r.get("speed_kmh"))
     assert next(r["frame"] for r in stated if r.get("speed_kmh")) <= first - 5
     assert "rear camera" not in said
+    mirrored, _ = _run(rear_copies["rear"], tmp_path, "--facing", "rear-mirrored")
+    assert all(r.get("facing") == "rear-mirrored" for r in mirrored)
     bad = run_cli("process", rear_copies["rear"], "-o", tmp_path / "x.mp4", "--facing", "up")
-    assert_one_line_error(bad, "--facing up")
+    assert_one_line_error(bad, "--facing up", "rear-mirrored")

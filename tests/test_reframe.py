@@ -140,29 +140,32 @@ def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
 
 @pytest.mark.slow
 def test_roadview_holds_on_a_rear_cameras_footage(data_dir: Path) -> None:
-    """The labelled clips played backwards and mirrored, as a rear camera films the road moving
-    away with its sides swapped, run without calibration: the speed (once the road is read as
-    moving away) and the distances are as at the same moments ahead. Told `--facing rear`, the
-    vehicle search sees the sides swapped back and meets the framings' aims but the lane's: its
-    start waits for the horizon where test_video ends (12 frames, 2 of them scored)."""
+    """The labelled clips played backwards, as a rear camera films the road moving away, run
+    without calibration: mirrored too (its file as its lens sees the road, the sides swapped)
+    or not (its file saved mirrored, as a rear-view mirror shows it). The speed (once the road
+    is read as moving away) and the distances are as at the same moments ahead. Told which of
+    the two it is (`--facing rear`, `--facing rear-mirrored`), the vehicle search sees traffic
+    keeping right as it was trained to, and meets the framings' aims but the lane's: its start
+    waits for the horizon where test_video ends (12 frames, 2 of them scored)."""
     clips = [
         (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
         for c in ("test_video", "project_cut_1", "project_cut_2")
     ]
-    unaided, told = REAR_FRAMINGS
-    table = framing_table(
-        clips, load_calibration(default_calibration_path()), [Framing("as is"), *REAR_FRAMINGS]
-    )
-    plain = table["as is"]
-    for row in (table[unaided.name], table[told.name]):
-        assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, row
-        assert abs(row["speed_ratio"] - 1) <= DISTANCE_DRIFT, row
-        assert row["mean_iou"] >= MEAN_IOU, row
-        assert row["lane_within_20px"] >= REAR_LANE_WITHIN, row
-    # Unaided, the search reads the swapped sides as traffic keeping left: as the mirrored row.
-    assert table[unaided.name]["precision"] >= MIRRORED_PRECISION, table
-    row = table[told.name]
-    assert row["precision"] >= PRECISION and row["recall"] >= plain["recall"] - RECALL_DROP, table
+    unaided, told, _, told_mirrored = REAR_FRAMINGS
+    framings = [Framing("as is"), unaided, told, told_mirrored]
+    table = framing_table(clips, load_calibration(default_calibration_path()), framings)
+    plain = table.pop("as is")
+    for name, row in table.items():
+        assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
+        assert abs(row["speed_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
+        assert row["mean_iou"] >= MEAN_IOU, (name, row)
+        assert row["lane_within_20px"] >= REAR_LANE_WITHIN, (name, row)
+        if name == unaided.name:
+            # The swapped sides read as traffic keeping left: as the mirrored row.
+            assert row["precision"] >= MIRRORED_PRECISION, (name, row)
+        else:
+            assert row["precision"] >= PRECISION, (name, row)
+            assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
 
 
 def test_distance_ratios_pair_the_same_vehicle_across_framings() -> None:
