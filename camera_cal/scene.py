@@ -447,16 +447,17 @@ class SceneTracker:
         overlays = tuple(b for b in self._captions if b[1] < live[3] and b[3] > live[1])
         if self.fixed_horizon is None and due and small is not None:
             before = len(self._estimates)
-            self._measure(small, self._scale, live, overlays)
+            pointed = self._measure(small, self._scale, live, overlays)
             # While the first horizon waits, a frame the shrunk picture gives no point for is
             # measured at full size: a camera pitched up sees only the road's far part, whose
             # dashes shrink below the segments' length (the first horizon took 21 frames).
             waiting = self.full_size_first and before < self.min_estimates
             if waiting and len(self._estimates) == before and self._scale < 1:
-                self._measure(grey, 1.0, live, overlays)
-            # ... and then with weaker edges: on pale concrete the yellow line is hardly darker
-            # or lighter than the road, and the first horizon took 39 frames (README).
-            if waiting and len(self._estimates) == before:
+                pointed = self._measure(grey, 1.0, live, overlays) or pointed
+            # ... and where neither gave a point (nor a vote for a night sky), with weaker edges:
+            # on pale concrete the yellow line is hardly darker or lighter than the road, and
+            # the first horizon took 39 frames (README). One point a frame at most.
+            if waiting and not pointed:
                 self._measure(small, self._scale, live, overlays, self.weak_edges)
         if self._count % self.light_every == 0:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
@@ -587,18 +588,20 @@ class SceneTracker:
         live: Box,
         overlays: tuple[Box, ...],
         strength: float = 1.0,
-    ) -> None:
+    ) -> bool:
         """Add this frame's vanishing point, when the road's edges outside the `overlays` give
-        one (`small`: the picture shrunk by `scale`; edges at `strength`)."""
+        one (`small`: the picture shrunk by `scale`; edges at `strength`), to the estimates or
+        to the votes for a night sky; whether it was either."""
         estimate = self._point(small, scale, live, overlays, strength)
         if estimate is None:
-            return
+            return False
         _, y0, _, y1 = (round(v * scale) for v in live)  # as the shrunk picture's rows
         h = y1 - y0
         y = estimate[1] * scale
         if y0 + 0.15 * h <= y <= y0 + 0.8 * h:
             self._estimates.append(estimate)
-        elif y0 > 0 and 0.15 * y1 <= y < y0 + 0.15 * h and not self._sky_top:
+            return True
+        if y0 > 0 and 0.15 * y1 <= y < y0 + 0.15 * h and not self._sky_top:
             # The road's lines meet in or just under a black band at the top: no bar leaves
             # the horizon there, a night sky does. Once the band's votes outnumber the
             # estimates, it is picture (and the votes are estimates).
@@ -606,3 +609,5 @@ class SceneTracker:
             if len(self._sky_votes) >= max(self.min_estimates, len(self._estimates) + 1):
                 self._sky_top = True
                 self._estimates.extend(self._sky_votes)
+            return True
+        return False
