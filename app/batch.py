@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from app.errors import USER_ERRORS, InputError, Interrupted, describe
+from app.events import event_record, seen_from_behind
 from app.mounting import Mounting
 from app.progress import Progress
 from app.sinks import atomic_output
@@ -185,7 +186,6 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float, li
     from app.annotators import default_annotators
     from app.assembly import build_stages
     from app.drivers import process_video
-    from app.events import event_record
     from app.runtime import tune_process
     from camera_cal import load_calibration
 
@@ -296,7 +296,7 @@ def write_table_parts(
             "grain": r.get("grain"),
             "horizon_y": r.get("horizon_y"),
             "ground_scale": r.get("ground_scale"),
-            "rear": r.get("facing") in ("rear", "rear-mirrored"),
+            "rear": seen_from_behind(r),
         }
         for r in rows
     ]

@@ -346,6 +346,11 @@ def nearest_ahead(row: Mapping[str, Any]) -> Mapping[str, Any] | None:
     return min(ahead, key=lambda v: float(v["distance_m"]), default=None)
 
 
+def seen_from_behind(row: Mapping[str, Any]) -> bool:
+    """Whether a record line is a rear camera's (its `facing`, either kind of file)."""
+    return row.get("facing") in ("rear", "rear-mirrored")
+
+
 def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
     """A record line's signals (see app/record.py): the lane's offset and width, the headway and
     time to collision, the nearest vehicle in our lane, and whether a rear camera saw it."""
@@ -359,6 +364,6 @@ def signals_from_record(row: Mapping[str, Any]) -> FrameSignals:
         row.get("headway_s"),
         row.get("ttc_s"),
         int(nearest["id"]) if nearest is not None else None,
-        row.get("facing") in ("rear", "rear-mirrored"),
+        seen_from_behind(row),
         row.get("facing") == "rear-mirrored",
     )

@@ -150,10 +150,11 @@ class Facing:
     def update(self, advance_m: float | None) -> bool:
         """Take in one frame's signed advance (None: not measured); whether the camera faces
         backwards."""
-        if advance_m is not None and advance_m > 0 and advance_m >= self.min_advance_m:
-            self._towards += 1
-        elif advance_m is not None and advance_m < 0 and -advance_m >= self.min_advance_m:
-            self._away += 1
+        if advance_m and abs(advance_m) >= self.min_advance_m:
+            if advance_m > 0:
+                self._towards += 1
+            else:
+                self._away += 1
         return self.rear
 
     @property

@@ -20,7 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.errors import InputError
-from app.events import LANE_WIDTH_M, Event, EventConfig, event_from_record, nearest_ahead
+from app.events import (
+    LANE_WIDTH_M,
+    Event,
+    EventConfig,
+    event_from_record,
+    nearest_ahead,
+    seen_from_behind,
+)
 from app.record import read_record_lines
 from app.sources import probe_video, read_frames
 from camera_cal import Calibration, fits, undistorter_for
@@ -66,7 +73,7 @@ def _curvature(row: Mapping[str, Any]) -> float:
 def _where(rows: Sequence[Mapping[str, Any]]) -> str:
     """Where the vehicle in our lane is: 'ahead', or 'behind' in a rear camera's record (its
     `facing`; see app/events.py)."""
-    return "behind" if any(r.get("facing") in ("rear", "rear-mirrored") for r in rows) else "ahead"
+    return "behind" if any(seen_from_behind(r) for r in rows) else "ahead"
 
 
 def record_series(rows: Sequence[Mapping[str, Any]]) -> tuple[NDArray[np.float64], list[Series]]:
