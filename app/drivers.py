@@ -75,6 +75,31 @@ REAR_NOTE = (
     "writing reads backwards) (the classifier learned mostly cars' rears and finds fewer of "
     "the fronts that follow)"
 )
+
+
+def facing_note(stated: bool | None, seen: bool | None) -> str | None:
+    """What to tell a user of the way the camera faces (True: backwards): the road moving away
+    from a camera stated nowhere (`REAR_NOTE`), or moving against the way stated (its speed
+    is then missing: it is read only in the stated direction); None: nothing to tell."""
+    if seen is None or stated == seen or (stated is None and not seen):
+        return None
+    if stated is None:
+        return REAR_NOTE
+    if seen:
+        return (
+            "stated to face forwards (--facing front), but its road moves away from the camera, "
+            "as a rear camera's does (or it plays backwards): its speed is missing (read only "
+            "as the road moves the way stated); pass --facing rear or rear-mirrored, or leave "
+            "--facing out to have it read from the road"
+        )
+    return (
+        "stated to face backwards (--facing rear or rear-mirrored), but its road comes towards "
+        "the camera, as a front camera's does: its speed is missing (read only as the road "
+        "moves the way stated), and the vehicle taken as behind is ahead; pass --facing front, "
+        "or leave --facing out to have it read from the road"
+    )
+
+
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
 MONOCHROME_NOTE = (
     "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
@@ -187,13 +212,10 @@ def process_video(
         # camera starting up shows none at first.
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         scales: list[float] = []  # the lanes' ground scale at each frame
-        rear = False  # the road read as moving away, as of the last frame: a rear camera's
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
             if out.result.scene is not None:
                 scales.append(out.result.scene.ground_scale)
-            if out.result.facts is not None:
-                rear = out.result.facts.rear
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:
@@ -217,8 +239,9 @@ def process_video(
                 f"note: {source.name} cuts to another shot at {at}; the stages started over "
                 "there (the scene measured afresh where another camera's picture begins)"
             )
-        if rear and mounting.rear is None:
-            log(f"note: {source.name} is {REAR_NOTE}")
+        facing = facing_note(mounting.rear, pipeline.facing_seen)
+        if facing is not None:
+            log(f"note: {source.name} is {facing}")
         height = pipeline.height_note(float(np.median(scales))) if scales else None
         if height is not None:
             log(f"note: {source.name}: {height}")

@@ -159,11 +159,21 @@ class Facing:
 
     @property
     def rear(self) -> bool:
-        """Whether the camera faces backwards: as stated, or the road seen moving away from it
-        more than towards it."""
+        """Whether the camera faces backwards: as stated, or as the road's motion says."""
         if self.stated is not None:
             return self.stated
-        return self._away >= self.least and self._away > self._towards
+        return self.seen is True
+
+    @property
+    def seen(self) -> bool | None:
+        """What the road's motion alone says, whatever was stated (True: it moved away from the
+        camera more than towards it, in at least `least` frames; False: the other way); None
+        while too little of it moved at driving speed to tell."""
+        if self._away >= self.least and self._away > self._towards:
+            return True
+        if self._towards >= self.least and self._towards > self._away:
+            return False
+        return None
 
 
 class FactsTracker:

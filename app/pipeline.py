@@ -231,6 +231,12 @@ class Pipeline:
         return camera_height_note(ground_scale, tuned, self.lanes.config.lane_width_m)
 
     @property
+    def facing_seen(self) -> bool | None:
+        """What the current shot's road motion says of the camera (True: it faces backwards;
+        None: not told yet), whatever the user stated (see `app.facts.Facing.seen`)."""
+        return None if self._facts is None else self._facts.facing.seen
+
+    @property
     def _unknown_camera(self) -> bool:
         """Neither a calibration nor `--horizon`: the stages wait for the footage's own horizon
         (see `_wait`), and the scene measures it hard while they do."""

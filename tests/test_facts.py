@@ -348,6 +348,11 @@ def test_a_road_moving_away_is_a_rear_camera_and_gives_the_speed() -> None:
         False, False, False, False, False, True
     ]  # fmt: skip
     assert not [facing.update(0.4) for _ in range(3)][-1]
+    # A stated facing stands, but the road's own reading is kept to tell a contradiction.
+    stated = Facing(least=3, stated=False)
+    told = [(stated.update(a), stated.seen) for a in [None] + [-0.5] * 3 + [0.5] * 4]
+    assert [seen for rear, seen in told] == [None] * 3 + [True] * 3 + [None, False]
+    assert not any(rear for rear, seen in told)
 
 
 def test_facts_in_the_record_follow_the_schema(test_video: Path, tmp_path: Path) -> None:

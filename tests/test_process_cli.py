@@ -307,7 +307,6 @@ def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: 
     assert not out.exists()
 
 
-
 @pytest.fixture(scope="module")
 def rear_copies(data_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """project_cut_2 undistorted as it is, and played backwards and mirrored: the road moving
@@ -368,3 +367,20 @@ def test_a_rear_cameras_footage_reads_the_speed_of_the_road_moving_away(
     assert all(r.get("facing") == "rear-mirrored" for r in mirrored)
     bad = run_cli("process", rear_copies["rear"], "-o", tmp_path / "x.mp4", "--facing", "up")
     assert_one_line_error(bad, "--facing up", "rear-mirrored")
+
+
+def test_a_stated_facing_the_road_contradicts_is_told(
+    rear_copies: dict[str, Path], tmp_path: Path
+) -> None:
+    """A rear camera's file stated to face forwards, or a front camera's stated to face
+    backwards: the stated way stands (no speed is read against it), and `process` says that
+    the road moves the other way and what to pass; told the right way, nothing is said."""
+    for video, stated, moves in (
+        (rear_copies["rear"], "front", "moves away"),
+        (rear_copies["ahead"], "rear", "comes towards"),
+    ):
+        rows, said = _run(video, tmp_path, "--facing", stated)
+        assert f"--facing {stated}" in said and moves in said, said
+        assert sum(1 for r in rows if r.get("speed_kmh")) <= len(rows) // 10, rows
+    _, said = _run(rear_copies["ahead"], tmp_path, "--facing", "front")
+    assert "--facing" not in said, said
