@@ -304,17 +304,60 @@ def grainy_scores(data: Path) -> dict[str, dict[str, float]]:
     return table
 
 
+def quality(data: Path, report: dict[str, Any]) -> None:
+    """The quality tables, printed and put in `report`: the re-framed clips and sensor grain
+    (deterministic, so they can be run apart from the speed figures on a busy machine)."""
+    calibration = load_calibration(default_calibration_path())
+    clips = [(clip, data / "labels" / f"{clip.stem}.json") for clip in _clip_paths(data)]
+    # A portrait picture is measured too, but is no part of the tested aims: its lane starts
+    # later (README).
+    source = probe_video(clips[0][0]).size
+    framings = [
+        *standard_framings(source),
+        upright_framing(source),
+        *dusk_framings(source),
+        *REAR_FRAMINGS,
+    ]
+    report["framings"] = framing_table(clips, calibration, framings)
+    # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to
+    # keep in view how blocky compression still fools the classifier.
+    blocky = framing_table(clips, calibration, [Framing("as is")], preset=FAST_PRESET)
+    report["framings"]["as is, blocky re-encode"] = blocky["as is"]
+    print("quality on re-framed clips (pooled over the three, IoU 0.5, --calibration none):")
+    for name, row in report["framings"].items():
+        print(
+            f"  {name:24s} precision {row['precision']:.3f}  recall {row['recall']:.3f}  "
+            f"mean IoU {row['mean_iou']:.3f}  lane within 20 px {row['lane_within_20px']:.3f}"
+            + (f"  distances x{row['distance_ratio']:.3f}" if "distance_ratio" in row else "")
+            + (f"  speed x{row['speed_ratio']:.3f}" if "speed_ratio" in row else "")
+        )
+    report["grainy"] = grainy_scores(data)
+    print("sensor grain (ffmpeg noise, x264 CRF 18), pooled over the three clips, IoU 0.5:")
+    for name, row in report["grainy"].items():
+        print(
+            f"  {name:14s} (read {row['grain_median']:.2f})  true {row['true_positives']:.0f}  "
+            f"false {row['false_positives']:.0f}  precision {row['precision']:.3f}  "
+            f"recall {row['recall']:.3f}"
+        )
+
+
 def main() -> None:
     """Run every benchmark, print a table and write output/bench.json."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--data", type=Path, default=ROOT / "data")
     parser.add_argument("--no-train", action="store_true", help="skip timing training (~1 min)")
     parser.add_argument("--only-batch", action="store_true", help="only the batch scaling figures")
+    parser.add_argument(
+        "--only-quality", action="store_true", help="only the quality tables (re-framed, grain)"
+    )
     args = parser.parse_args()
     tune_process()  # as `roadview` does, so stage figures match the product
     report: dict[str, Any] = {"clips": {}}
     if args.only_batch:
         print(json.dumps(batch_scaling(args.data), indent=2))
+        return
+    if args.only_quality:
+        quality(args.data, report)
         return
     for clip in _clip_paths(args.data):
         stages = stage_times(clip)
@@ -387,38 +430,7 @@ def main() -> None:
         f"per-window {naive['naive_ms']:.0f} ms ({naive['windows']} windows): "
         f"{naive['speedup']:.0f}x"
     )
-    calibration = load_calibration(default_calibration_path())
-    clips = [(clip, args.data / "labels" / f"{clip.stem}.json") for clip in _clip_paths(args.data)]
-    # A portrait picture is measured too, but is no part of the tested aims: its lane starts
-    # later (README).
-    source = probe_video(clips[0][0]).size
-    framings = [
-        *standard_framings(source),
-        upright_framing(source),
-        *dusk_framings(source),
-        *REAR_FRAMINGS,
-    ]
-    report["framings"] = framing_table(clips, calibration, framings)
-    # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to
-    # keep in view how blocky compression still fools the classifier.
-    blocky = framing_table(clips, calibration, [Framing("as is")], preset=FAST_PRESET)
-    report["framings"]["as is, blocky re-encode"] = blocky["as is"]
-    print("quality on re-framed clips (pooled over the three, IoU 0.5, --calibration none):")
-    for name, row in report["framings"].items():
-        print(
-            f"  {name:24s} precision {row['precision']:.3f}  recall {row['recall']:.3f}  "
-            f"mean IoU {row['mean_iou']:.3f}  lane within 20 px {row['lane_within_20px']:.3f}"
-            + (f"  distances x{row['distance_ratio']:.3f}" if "distance_ratio" in row else "")
-            + (f"  speed x{row['speed_ratio']:.3f}" if "speed_ratio" in row else "")
-        )
-    report["grainy"] = grainy_scores(args.data)
-    print("sensor grain (ffmpeg noise, x264 CRF 18), pooled over the three clips, IoU 0.5:")
-    for name, row in report["grainy"].items():
-        print(
-            f"  {name:14s} (read {row['grain_median']:.2f})  true {row['true_positives']:.0f}  "
-            f"false {row['false_positives']:.0f}  precision {row['precision']:.3f}  "
-            f"recall {row['recall']:.3f}"
-        )
+    quality(args.data, report)
     report["patch_features_ms"] = patch_feature_ms(args.data)
     print(f"features of one 64x64 patch: {report['patch_features_ms']:.3f} ms")
     if not args.no_train:
