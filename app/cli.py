@@ -117,6 +117,39 @@ FacingOption = Annotated[
 ]
 
 
+FocalLengthOption = Annotated[
+    float | None,
+    typer.Option(
+        "--focal-length",
+        metavar="MM",
+        help="The lens's focal length in 35 mm terms, as a phone's camera specs give it (26 for "
+        "most phones' main camera): sets the distances and speed of a camera without a "
+        "calibration (default: the video's tag where a phone wrote one, else the shipped "
+        "dashcam's lens, 31).",
+    ),
+]
+
+
+def _mounting(
+    horizon: float | None,
+    camera_height: float | None,
+    traffic: str,
+    roll: float,
+    facing: str,
+    focal_length: float | None,
+    calibration: str,
+) -> Mounting:
+    """The `Mounting` the options state; a focal length beside a calibration file is refused
+    (the calibration holds the lens's own)."""
+    if focal_length is not None and _named(calibration) and calibration.lower() != "none":
+        raise InputError(
+            f"--focal-length and --calibration {calibration} both give the lens; pass one (the "
+            "calibration holds its focal length)"
+        )
+    keep_left = _keep_left(traffic)
+    return Mounting(horizon, camera_height, keep_left, roll, _facing(facing), focal_length)
+
+
 def _facing(facing: str) -> str:
     """The `--facing` value in lower case (checked with the rest of the mounting)."""
     return facing.strip().lower()
@@ -310,6 +343,7 @@ def process_command(
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
     roll: RollOption = 0.0,
     facing: FacingOption = "auto",
+    focal_length: FocalLengthOption = None,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -319,7 +353,7 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
-    mounting = Mounting(horizon, camera_height, _keep_left(traffic), roll, _facing(facing))
+    mounting = _mounting(horizon, camera_height, traffic, roll, facing, focal_length, calibration)
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
@@ -392,11 +426,12 @@ def batch_command(
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
     roll: RollOption = 0.0,
     facing: FacingOption = "auto",
+    focal_length: FocalLengthOption = None,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
 
-    mounting = Mounting(None, camera_height, _keep_left(traffic), roll, _facing(facing))
+    mounting = _mounting(None, camera_height, traffic, roll, facing, focal_length, calibration)
     check_mounting(mounting)
     entries = find_inputs(inputs)
     if not entries:
@@ -435,6 +470,7 @@ def debug_command(
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
     roll: RollOption = 0.0,
     facing: FacingOption = "auto",
+    focal_length: FocalLengthOption = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -452,7 +488,9 @@ def debug_command(
     pipeline = Pipeline(
         cal,
         *stages,
-        mounting=Mounting(horizon, camera_height, _keep_left(traffic), roll, _facing(facing)),
+        mounting=_mounting(
+            horizon, camera_height, traffic, roll, facing, focal_length, calibration
+        ),
     )
     written = run_debug(
         source,

@@ -12,9 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
-from app.drivers import calibration_for
+from app.drivers import camera_for
 from app.errors import InputError
-from app.mounting import video_mounting
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
 from app.sources import (
@@ -202,14 +201,13 @@ def run_debug(
     info = within_size(probe_video(source), max_size)
     for note in decoding_notes(info):
         log(f"note: {source.name}: {note}")
-    pipeline.calibration = calibration_for(
-        pipeline.calibration, info.size, source.name, calibration_required, log
+    pipeline.calibration, pipeline.mounting = camera_for(
+        pipeline.calibration, pipeline.mounting, info, source.name, calibration_required, log
     )
     first, last = frames
     if first >= info.n_frames:
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
-    pipeline.mounting = video_mounting(pipeline.mounting, info)
     ensure_writable_dir(out_dir)
     start = max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)

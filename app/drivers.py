@@ -24,6 +24,7 @@ from app.record import frame_record
 from app.runtime import warm_up_opencv
 from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
 from app.sources import (
+    VideoInfo,
     decoding_notes,
     prefetch,
     probe_video,
@@ -107,12 +108,34 @@ MONOCHROME_NOTE = (
 )
 
 
+def lens_note(focal_mm: float | None, tagged: bool, dropped: bool) -> str | None:
+    """What to tell of a lens whose focal length is known without a calibration: from the file's
+    tag (`tagged`, a phone's), and so another camera than the shipped one, whose calibration
+    was left out (`dropped`); None: nothing to tell (stated, and no calibration to leave)."""
+    if focal_mm is None or not (tagged or dropped):
+        return None
+    said = (
+        f"its file gives its lens's focal length ({focal_mm:g} mm in 35 mm terms, a phone's tag): "
+        "its distances and speed follow it (--focal-length MM overrides it)"
+        if tagged
+        else f"a lens of {focal_mm:g} mm in 35 mm terms (--focal-length)"
+    )
+    if dropped:
+        said += (
+            "; another camera than the shipped one, so processed without its calibration (a "
+            "phone corrects its lens itself; pass --calibration FILE of this camera to undistort "
+            "it)"
+        )
+    return said
+
+
 def calibration_for(
     calibration: Calibration | None,
     size: tuple[int, int],
     name: str,
     required: bool,
     log: Callable[[str], None],
+    focal_mm: float | None = None,
 ) -> Calibration | None:
     """The calibration to undistort `name`'s frames of `size` with: `calibration` where it fits.
     Frames of another aspect ratio come from another camera: without a calibration the user
@@ -120,9 +143,13 @@ def calibration_for(
     `CalibrationMismatch` says it does not fit. Frames of another size with the aspect ratio of
     a calibration the user did not name (the shipped one; a still's any) are undistorted with it
     scaled, and `log` says so: most dashcams film 16:9, and another camera's footage needs
-    `--calibration none` or its own."""
+    `--calibration none` or its own. A lens whose `focal_mm` is known (stated, or a phone's tag)
+    is another camera's: such frames are processed without a calibration the user did not name
+    (`lens_note` says so)."""
     if calibration is None or required:
         return calibration
+    if focal_mm is not None:
+        return None
     cw, ch = calibration.image_size
     if fits(calibration, size):
         if tuple(size) != (cw, ch):
@@ -138,6 +165,27 @@ def calibration_for(
         "of this camera to undistort it)"
     )
     return None
+
+
+def camera_for(
+    calibration: Calibration | None,
+    mounting: Mounting,
+    info: VideoInfo,
+    name: str,
+    required: bool,
+    log: Callable[[str], None],
+) -> tuple[Calibration | None, Mounting]:
+    """The calibration and mounting to process the video `info` describes with: the mounting
+    checked against it and given the lens its tag states (`video_mounting`), the calibration
+    that fits (`calibration_for`), and `log` told of a lens known without one (`lens_note`)."""
+    tagged = mounting.focal_mm is None and info.focal_mm is not None
+    mounting = video_mounting(mounting, info)
+    dropped = mounting.focal_mm is not None and calibration is not None and not required
+    calibration = calibration_for(calibration, info.size, name, required, log, mounting.focal_mm)
+    # A calibration the user named sets the lens, whatever the tag says.
+    if (lens := lens_note(mounting.focal_mm, tagged and calibration is None, dropped)) is not None:
+        log(f"note: {name}: {lens}")
+    return calibration, mounting
 
 
 def process_video(
@@ -174,12 +222,11 @@ def process_video(
     try:
         info = within_size(probe_video(source), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
-        mounting = video_mounting(mounting or Mounting(), info)
+        calibration, mounting = camera_for(
+            calibration, mounting or Mounting(), info, source.name, calibration_required, log
+        )
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
-        calibration = calibration_for(
-            calibration, info.size, source.name, calibration_required, log
-        )
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()
@@ -282,7 +329,9 @@ def process_still(
     mounting = mounting or Mounting()
     check_mounting(mounting, size)
     started = time.perf_counter()
-    calibration = calibration_for(calibration, size, source.name, False, log)
+    if (lens := lens_note(mounting.focal_mm, False, calibration is not None)) is not None:
+        log(f"note: {source.name}: {lens}")
+    calibration = calibration_for(calibration, size, source.name, False, log, mounting.focal_mm)
     with Pipeline(calibration, lanes, vehicles, mounting=mounting) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)

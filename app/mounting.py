@@ -1,8 +1,8 @@
 """What the user says of how the camera is mounted, and the checks that it is a dashcam's.
 
 Each value takes the place of what the footage or the tuned camera would give; the CLI builds
-one `Mounting` from `--horizon`, `--camera-height`, `--traffic`, `--roll` and `--facing`, and the
-pipeline reads it (app/pipeline.py).
+one `Mounting` from `--horizon`, `--camera-height`, `--traffic`, `--roll`, `--facing` and
+`--focal-length`, and the pipeline reads it (app/pipeline.py).
 """
 
 from __future__ import annotations
@@ -23,13 +23,16 @@ class Mounting:
     which way the camera looks (`FACINGS`: "auto" reads it from the road's motion,
     `app.facts.Facing`; "rear" is a rear camera's file as its lens sees the road, its sides
     swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one saved mirrored,
-    as a rear-view mirror shows the road, its writing backwards and its sides as ahead)."""
+    as a rear-view mirror shows the road, its writing backwards and its sides as ahead), and
+    the lens's focal length in 35 mm terms (None: the shipped camera's; sets the distances of a
+    camera without a calibration, see `camera_cal.undistort.focal_scale_height`)."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None
     keep_left: bool = False
     roll_deg: float = 0.0
     facing: str = "auto"
+    focal_mm: float | None = None
 
     @property
     def rear(self) -> bool | None:
@@ -106,6 +109,21 @@ def check_roll(roll_deg: float) -> None:
         )
 
 
+# 35 mm-equivalent focal lengths a user may state, in mm: a fisheye's to a telephoto's (a
+# phone's main camera is 24-28, the shipped dashcam's 31).
+FOCAL_LENGTHS_MM = (8.0, 300.0)
+
+
+def check_focal_length(focal_mm: float | None) -> None:
+    """A user's focal length must be one a camera's lens can have."""
+    low, high = FOCAL_LENGTHS_MM
+    if focal_mm is not None and not low <= focal_mm <= high:
+        raise InputError(
+            f"--focal-length {focal_mm:g} mm is not a camera lens's; pass its 35 mm-equivalent "
+            f"focal length, from {low:g} to {high:g} mm (a phone's main camera is about 26)"
+        )
+
+
 def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
     """A user's horizon row must lie inside the frame."""
     if horizon_y is not None and not 0 <= horizon_y < size[1]:
@@ -123,10 +141,13 @@ def check_mounting(mounting: Mounting, size: tuple[int, int] | None = None) -> N
     check_camera_height(mounting.camera_height_m)
     check_roll(mounting.roll_deg)
     check_facing(mounting.facing)
+    check_focal_length(mounting.focal_mm)
 
 
 def video_mounting(mounting: Mounting, info: VideoInfo) -> Mounting:
     """A user's mounting checked against a video, its horizon (a row of the video as stored)
-    as a row of the frames processed (`within_size` may have reduced them)."""
+    as a row of the frames processed (`within_size` may have reduced them), and the lens's
+    focal length the video's tag gives where the user stated none."""
     check_mounting(mounting, info.reduced_from or info.size)
-    return replace(mounting, horizon_y=reduced_row(mounting.horizon_y, info))
+    focal_mm = mounting.focal_mm if mounting.focal_mm is not None else info.focal_mm
+    return replace(mounting, horizon_y=reduced_row(mounting.horizon_y, info), focal_mm=focal_mm)

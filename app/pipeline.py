@@ -33,6 +33,7 @@ from camera_cal import (
     ShotDetector,
     Undistorter,
     calibrated_scale_height,
+    focal_scale_height,
     horizon_estimates,
     same_camera,
     undistorter_for,
@@ -244,7 +245,15 @@ class Pipeline:
 
     def _new_scene(self, size: tuple[int, int], fps: float) -> SceneTracker:
         """A scene tracker with no history, for a clip or a shot of frames of `size` at `fps`."""
-        lens = calibrated_scale_height(self.calibration, size) if self.calibration else None
+        # The lens sets the scale where it is known: a calibration's, else a focal length stated
+        # or tagged (a phone's); otherwise the scene takes the shipped camera's.
+        lens = (
+            calibrated_scale_height(self.calibration, size)
+            if self.calibration
+            else focal_scale_height(self.mounting.focal_mm, size)
+            if self.mounting.focal_mm
+            else None
+        )
         lanes = self.lanes.config if self.lanes is not None else LaneConfig()
         return SceneTracker(
             size,

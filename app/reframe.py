@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import copy
 import json
+import subprocess
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +27,9 @@ from app.evaluate import FrameLabels, evaluate, load_labels_document
 from app.mounting import Mounting
 from app.record import read_record
 from app.sinks import VideoSink
-from app.sources import Frame, probe_video, read_frames
+from app.sources import FOCAL_LENGTH_KEY, Frame, ffmpeg_binary, probe_video, read_frames
 from camera_cal import Calibration, undistorter_for
+from camera_cal.undistort import equivalent_focal_mm, output_camera_matrix
 from vehicles.detections import iou_matrix
 from vehicles.model import VehicleModel
 
@@ -54,7 +56,8 @@ class Framing:
     (`--roll`): its output is levelled back, so the labels stay where they are; `reverse`: the
     frames played backwards, the road moving away as a rear camera films it (with `mirror`, its
     sides swapped too, as a rear camera's lens sees them; without, as its file saved mirrored
-    shows them); `facing`: what roadview is told of that (`--facing`)."""
+    shows them); `facing`: what roadview is told of that (`--facing`); `focal_mm`: the copy
+    tagged with its lens's focal length in 35 mm terms, as a phone tags its videos."""
 
     name: str
     crop: Box | None = None
@@ -67,6 +70,7 @@ class Framing:
     roll: float = 0.0
     reverse: bool = False
     facing: str = "auto"
+    focal_mm: float | None = None
 
     @property
     def unchanged(self) -> bool:
@@ -170,6 +174,19 @@ def upright_framing(source: tuple[int, int]) -> Framing:
     w, h = source
     side = (w - h) // 2
     return Framing("phone held upright", crop=(side, 0, side + h, h), pad=(0, side, 0, side))
+
+
+def tagged_lens_framing(source: tuple[int, int], calibration: Calibration) -> Framing:
+    """The narrower view of a `source`-sized clip undistorted with `calibration` (its middle
+    80 % enlarged back: a lens 1.25 times longer) tagged with that lens's focal length, as a
+    phone tags its videos: read from the tag, its distances are the clip's own."""
+    narrow = next(f for f in standard_framings(source) if f.name == "narrower view")
+    focal = 1.25 * output_camera_matrix(calibration, source)[1, 1]
+    return replace(
+        narrow,
+        name="narrower view, its lens tagged",
+        focal_mm=round(equivalent_focal_mm(float(focal), source), 2),
+    )
 
 
 def dusk_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
@@ -305,7 +322,22 @@ def write_reframed(
             while framing.source_frame(shown, count) == index:
                 sink.write(picture)
                 shown += 1
+    if framing.focal_mm is not None:
+        tag_focal_length(output, framing.focal_mm)
     return size
+
+
+def tag_focal_length(video: Path, focal_mm: float) -> None:
+    """Tag the MP4 or MOV `video` in place with its lens's focal length in 35 mm terms, as a
+    phone does (the streams copied as they are)."""
+    tagged = video.with_name(f".tagged{video.suffix}")
+    command = [
+        ffmpeg_binary(), "-nostdin", "-loglevel", "error", "-y", "-i", str(video), "-map", "0",
+        "-c", "copy", "-movflags", "use_metadata_tags", "-metadata",
+        f"{FOCAL_LENGTH_KEY}={focal_mm:g}", str(tagged),
+    ]  # fmt: skip
+    subprocess.run(command, check=True, capture_output=True)
+    tagged.replace(video)
 
 
 def retime_labels(

@@ -345,7 +345,10 @@ def event_thumbnails(
             f"--video {video} is {info.size[0]}x{info.size[1]} but the record's frames are "
             f"{size[0]}x{size[1]}; pass the video the record was made from"
         )
-    lens = calibration if calibration is not None and fits(calibration, info.size) else None
+    # A video that tags its lens (a phone's) is another camera's: `process` left the shipped
+    # calibration out (`app.drivers.calibration_for`).
+    fitting = calibration is not None and fits(calibration, info.size)
+    lens = calibration if fitting and info.focal_mm is None else None
     undistort = undistorter_for(lens, info.size, roll_deg)
     by_frame = {int(r["frame"]): r for r in rows}
     thumbnails = {}

@@ -83,6 +83,8 @@ class VideoInfo:
     # Stored as fields (a camcorder's or a broadcast's 1080i): decoded, each frame is
     # deinterlaced, else a moving car's rows alternate between two moments (combing).
     interlaced: bool = False
+    # The lens's focal length in 35 mm terms as the file's tag states it (a phone's), or None.
+    focal_mm: float | None = None
 
 
 def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
@@ -131,6 +133,10 @@ _ROTATION = re.compile(r"(?:rotation of|rotate\s*:)\s*(-?[\d.]+)")
 _SAR = re.compile(r"\[SAR (\d+):(\d+) DAR")
 _FIELDS = re.compile(r"\b(?:top|bottom) (?:coded )?first\b")
 _HDR = re.compile(r"\b(smpte2084|arib-std-b67)\b")
+# The key of the lens's 35 mm-equivalent focal length in mm, as an iPhone (and apps writing
+# Apple's keys) tags its videos: ffmpeg lists it among the file's metadata.
+FOCAL_LENGTH_KEY = "com.apple.quicktime.camera.focal_length.35mm_equivalent"
+_FOCAL = re.compile(rf"^\s*{re.escape(FOCAL_LENGTH_KEY)}\s*:\s*([\d.]+)")
 _DURATION = re.compile(r"Duration: (\d+):(\d+):([\d.]+)")
 _FILE_START = re.compile(r"Duration: .*?\bstart: (-?[\d.]+)")
 _STREAM_START = re.compile(r"\bstart (-?[\d.]+)")
@@ -157,6 +163,7 @@ class ProbeFacts:
     pixel_aspect: float = 1.0
     hdr: str | None = None
     interlaced: bool = False
+    focal_mm: float | None = None
     file_start: float = 0.0  # seconds: the earliest stream's first timestamp
     video_start: float | None = None  # seconds: the video's first frame's, when ffmpeg says
     errors: list[str] = field(default_factory=list)
@@ -203,6 +210,8 @@ def parse_probe(text: str) -> ProbeFacts:
                     in_video = True
             elif in_video and (rotation := _ROTATION.search(line)) is not None:
                 facts.rotation = round(float(rotation.group(1))) % 360
+            elif (focal := _FOCAL.match(line)) is not None and float(focal.group(1)) > 0:
+                facts.focal_mm = float(focal.group(1))
         if (match := _PACKETS.search(line)) is not None:
             facts.packets = int(match.group(1))
         if (match := _LEVEL.search(raw)) is not None:
@@ -348,6 +357,7 @@ def probe_video(path: Path) -> VideoInfo:
         interlaced=facts.interlaced,
         video_start_s=video_start_s,
         frame_times=frame_times,
+        focal_mm=facts.focal_mm,
     )
 
 

@@ -29,6 +29,7 @@ from app.reframe import (
     dusk_framings,
     framing_table,
     standard_framings,
+    tagged_lens_framing,
     upright_framing,
     write_reframed,
 )
@@ -314,6 +315,7 @@ def quality(data: Path, report: dict[str, Any]) -> None:
     source = probe_video(clips[0][0]).size
     framings = [
         *standard_framings(source),
+        tagged_lens_framing(source, calibration),
         upright_framing(source),
         *dusk_framings(source),
         *REAR_FRAMINGS,

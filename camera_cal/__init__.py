@@ -25,6 +25,7 @@ from camera_cal.undistort import (
     build_undistorter,
     calibrated_scale_height,
     fits,
+    focal_scale_height,
     undistorter_for,
 )
 
@@ -44,6 +45,7 @@ __all__ = [
     "default_calibration_path",
     "find_board_corners",
     "fits",
+    "focal_scale_height",
     "horizon_estimates",
     "load_calibration",
     "monochrome",

@@ -172,3 +172,30 @@ def calibrated_scale_height(calibration: Calibration, size: tuple[int, int]) -> 
     shipped = load_calibration(default_calibration_path())
     fy = output_camera_matrix(calibration, size)[1, 1]
     return float(fy / shipped.camera_matrix[1, 1] * shipped.image_size[1])
+
+
+# The width of a 4:3 picture whose diagonal is a 35 mm film frame's (36 x 24 mm: 43.27 mm), in
+# mm: a 35 mm-equivalent focal length is a phone's over its 4:3 sensor, whose full width its
+# 16:9 video keeps (an iPhone 13 mini's 26 mm main camera: 67.8 degrees across, as it reports).
+EQUIVALENT_WIDTH_MM = 0.8 * float(np.hypot(36.0, 24.0))
+
+
+def focal_length_px(focal_mm: float, size: tuple[int, int]) -> float:
+    """The focal length in pixels of frames of `size` from a lens of `focal_mm` in 35 mm terms,
+    spanning the picture's longer side as the sensor's width (a phone held upright turns it)."""
+    return focal_mm / EQUIVALENT_WIDTH_MM * max(size)
+
+
+def equivalent_focal_mm(focal_px: float, size: tuple[int, int]) -> float:
+    """The 35 mm-equivalent focal length of a lens of `focal_px` pixels on frames of `size` (the
+    inverse of `focal_length_px`)."""
+    return focal_px * EQUIVALENT_WIDTH_MM / max(size)
+
+
+def focal_scale_height(focal_mm: float, size: tuple[int, int]) -> float:
+    """The scale height (see `calibrated_scale_height`) of frames of `size` from a camera without
+    a calibration whose lens's 35 mm-equivalent focal length is known (a phone tags its videos
+    with it): a lens without distortion of that focal length."""
+    shipped = load_calibration(default_calibration_path())
+    focal = focal_length_px(focal_mm, size)
+    return float(focal / shipped.camera_matrix[1, 1] * shipped.image_size[1])

@@ -18,6 +18,7 @@ from camera_cal import (
     calibrate_frames,
     calibrated_scale_height,
     default_calibration_path,
+    focal_scale_height,
     load_calibration,
     save_calibration,
 )
@@ -190,6 +191,25 @@ def test_a_calibrated_lens_sets_the_scale_the_stages_work_in() -> None:
     matrix[:2, :2] *= 2
     longer = dataclasses.replace(cal, camera_matrix=matrix)
     assert calibrated_scale_height(longer, (1280, 720)) == pytest.approx(1440)
+
+
+def test_a_lens_known_by_its_focal_length_sets_the_scale_as_a_calibration_would() -> None:
+    """Without a calibration, a lens of a stated (or tagged) 35 mm-equivalent focal length is
+    one without distortion of that focal length: the shipped lens's own reads as its picture's
+    height, a longer one's as a taller picture, at any size; a phone held upright spans its
+    longer side, as its sensor's width, so the same lens gives the same focal length."""
+    from camera_cal.undistort import equivalent_focal_mm, focal_length_px, output_camera_matrix
+
+    cal = load_calibration(default_calibration_path())
+    shipped = equivalent_focal_mm(float(output_camera_matrix(cal, (1280, 720))[1, 1]), (1280, 720))
+    assert 30 < shipped < 33  # a phone's main camera is 24-28 mm: wider
+    assert focal_scale_height(shipped, (1280, 720)) == pytest.approx(720)
+    assert focal_scale_height(shipped, (1920, 1080)) == pytest.approx(1080)
+    assert focal_scale_height(2 * shipped, (1280, 720)) == pytest.approx(1440)
+    assert focal_length_px(26, (1080, 1920)) == focal_length_px(26, (1920, 1080))
+    # An iPhone's 26 mm main camera over its full 4:3 width: 67.8 degrees across, as it says.
+    across = 2 * np.degrees(np.arctan(2016 / focal_length_px(26, (4032, 3024))))
+    assert across == pytest.approx(67.8, abs=0.6)
 
 
 def test_a_wide_lens_keeps_the_sides_of_its_picture() -> None:

@@ -493,6 +493,28 @@ def test_the_starts_ffmpeg_reports_are_read_even_at_zero_or_below() -> None:
     assert facts.file_start == -0.04 and facts.video_start == 0.0 and facts.audio
 
 
+def test_a_phones_lens_tag_is_read() -> None:
+    """The focal length an iPhone tags its videos with, as ffmpeg lists the file's metadata;
+    a file without it has none."""
+    header = (
+        "Input #0, mov,mp4,m4a,3gp,3g2,mj2, from 'IMG_0001.MOV':\n"
+        "  Metadata:\n"
+        "    major_brand     : qt\n"
+        "    com.apple.quicktime.make: Apple\n"
+        "    com.apple.quicktime.camera.focal_length.35mm_equivalent: 26\n"
+        "  Duration: 00:00:02.00, start: 0.000000, bitrate: 3276 kb/s\n"
+    )
+    stream = (
+        "  Stream #0:0[0x1](und): Video: hevc (Main 10), yuv420p10le, 1920x1080, 30 fps, "
+        "30 tbr, 600 tbn\n"
+    )
+    assert parse_probe(header + stream).focal_mm == 26.0
+    assert (
+        parse_probe(header.replace("35mm_equivalent: 26", "lens_model: Back") + stream).focal_mm
+        is None
+    )
+
+
 def test_the_sound_stays_with_the_picture_when_the_video_starts_late(
     test_video: Path, tmp_path: Path
 ) -> None:
