@@ -289,6 +289,8 @@ def process_video(
         facing = facing_note(mounting.rear, pipeline.facing_seen)
         if facing is not None:
             log(f"note: {source.name} is {facing}")
+        if count and (horizon := pipeline.horizon_note()) is not None:
+            log(f"note: {source.name}: {horizon}")
         height = pipeline.height_note(float(np.median(scales))) if scales else None
         if height is not None:
             log(f"note: {source.name}: {height}")

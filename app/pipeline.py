@@ -158,6 +158,7 @@ class Pipeline:
         self._id_offset = 0  # vehicle ids the earlier shots used
         self._last_id = 0
         self.cuts: list[int] = []  # frame numbers where a new shot started
+        self._horizon_found = False  # the footage showed its horizon in some frame
 
     def __enter__(self) -> Pipeline:
         return self
@@ -208,6 +209,7 @@ class Pipeline:
         self._last = None
         self._shot_start = self._id_offset = self._last_id = 0
         self.cuts = []
+        self._horizon_found = False
         self._wait = round(HORIZON_WAIT_S * fps) if self._unknown_camera else 0
         frame_bytes = size[0] * size[1] * 3
         if self._worker is not None and self._worker.frame_bytes < frame_bytes:
@@ -230,6 +232,22 @@ class Pipeline:
             return None
         tuned = RoadGeometry.of(self.lanes.view(self.size)).camera_height_m
         return camera_height_note(ground_scale, tuned, self.lanes.config.lane_width_m)
+
+    def horizon_note(self) -> str | None:
+        """What a user should hear when an unknown camera's footage never showed its horizon:
+        after waiting for it, the stages placed their work by the tuned camera's (None: it was
+        found, stated or calibrated, or no stage ran)."""
+        if self._horizon_found or not self._unknown_camera or self.size is None:
+            return None
+        if self.lanes is None and self.vehicles is None:
+            return None
+        return (
+            "its road's vanishing point was never found (no straight road edges or lane lines "
+            f"met below a horizon), so lanes and vehicles were looked for as under the shipped "
+            f"camera's horizon, row {self._default_horizon:.0f} of {self.size[1]}: if the road "
+            "vanishes elsewhere, pass --horizon Y (the row where it does), or --calibration "
+            "FILE of this camera"
+        )
 
     @property
     def facing_seen(self) -> bool | None:
@@ -350,6 +368,7 @@ class Pipeline:
             elif self.vehicles is not None:
                 self.vehicles.reset(self._fps)
         scene = self._scene.update(undistorted, frame)
+        self._horizon_found = self._horizon_found or scene.estimated
         self._last = (undistorted, scene)
         timings["scene"] = (time.perf_counter() - t0) * 1000
         placement = self._scene.placement

@@ -452,3 +452,29 @@ def test_a_lens_stated_or_tagged_gives_its_distances_and_speed(
                   "--calibration", own)  # fmt: skip
     assert_one_line_error(bad, "--focal-length", "pass one")
     assert not out.exists()
+
+
+def test_footage_that_never_shows_its_horizon_is_told(test_video: Path, tmp_path: Path) -> None:
+    """An unknown camera's footage whose road never shows a vanishing point (here a grey, grainy
+    picture): the stages wait for it and then work under the tuned camera's horizon, and
+    `process` says so and what to pass; stated (`--horizon`), or found (test_video), nothing
+    is said."""
+    from app.sources import ffmpeg_binary
+
+    grey = tmp_path / "grey.mp4"
+    subprocess.run(
+        [ffmpeg_binary(), "-loglevel", "error", "-f", "lavfi", "-i",
+         "color=c=0x707070:s=640x360:d=4:r=25", "-vf", "noise=alls=10:allf=t", "-pix_fmt",
+         "yuv420p", str(grey)],
+        check=True,
+    )  # fmt: skip
+    out = tmp_path / "o.mp4"
+    for video, options, told in (
+        (grey, (), True),
+        (grey, ("--horizon", "200"), False),
+        (test_video, ("--no-vehicles",), False),
+    ):
+        result = run_cli("process", video, "-o", out, "--calibration", "none", *options)
+        assert result.returncode == 0, result.stderr
+        said = "vanishing point was never found" in result.stderr
+        assert said == told and (not told or "--horizon Y" in result.stderr), result.stderr
