@@ -9,7 +9,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,7 @@ from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
 from app.sources import (
     VideoInfo,
     decoding_notes,
+    image_focal_mm,
     prefetch,
     probe_video,
     read_frames,
@@ -115,7 +116,8 @@ def lens_note(focal_mm: float | None, tagged: bool, dropped: bool) -> str | None
     if focal_mm is None or not (tagged or dropped):
         return None
     said = (
-        f"its file gives its lens's focal length ({focal_mm:g} mm in 35 mm terms, a phone's tag): "
+        f"its file gives its lens's focal length ({focal_mm:g} mm in 35 mm terms, as a phone "
+        "tags it): "
         "its distances and speed follow it (--focal-length MM overrides it)"
         if tagged
         else f"a lens of {focal_mm:g} mm in 35 mm terms (--focal-length)"
@@ -330,8 +332,11 @@ def process_still(
     size = (image.shape[1], image.shape[0])
     mounting = mounting or Mounting()
     check_mounting(mounting, size)
+    tagged = mounting.focal_mm is None and (focal := image_focal_mm(source)) is not None
+    if tagged:
+        mounting = replace(mounting, focal_mm=focal)
     started = time.perf_counter()
-    if (lens := lens_note(mounting.focal_mm, False, calibration is not None)) is not None:
+    if (lens := lens_note(mounting.focal_mm, tagged, calibration is not None)) is not None:
         log(f"note: {source.name}: {lens}")
     calibration = calibration_for(calibration, size, source.name, False, log, mounting.focal_mm)
     with Pipeline(calibration, lanes, vehicles, mounting=mounting) as pipeline:

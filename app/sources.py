@@ -561,6 +561,23 @@ def read_image(path: Path) -> Frame:
     return np.ascontiguousarray(image)
 
 
+# EXIF's sub-directory of picture-taking facts, and its 35 mm-equivalent focal length in it.
+_EXIF_IFD, _FOCAL_35MM = 0x8769, 0xA405
+
+
+def image_focal_mm(path: Path) -> float | None:
+    """The lens's focal length in 35 mm terms that a still's EXIF states (a phone's photo), or
+    None: none stated, or not a file Pillow reads."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            focal = image.getexif().get_ifd(_EXIF_IFD).get(_FOCAL_35MM)
+    except (OSError, UnidentifiedImageError, ValueError):
+        return None
+    return float(focal) if isinstance(focal, int | float) and focal > 0 else None
+
+
 def prefetch(frames: Iterator[Frame], depth: int = 4) -> Iterator[Frame]:
     """Decode ahead in a thread so reading the pipe overlaps with processing."""
     queue: Queue[Frame | BaseException | None] = Queue(maxsize=depth)

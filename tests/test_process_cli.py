@@ -438,7 +438,7 @@ def test_a_lens_stated_or_tagged_gives_its_distances_and_speed(
     assert all(r < 0.85 for r in ratios(plain)), ratios(plain)
     tagged, said = run(narrow_copies["tagged"])
     assert all(abs(r - 1) < 0.06 for r in ratios(tagged)), ratios(tagged)
-    assert "a phone's tag" in said and "without its calibration" in said, said
+    assert "as a phone tags it" in said and "without its calibration" in said, said
     stated, said = run(narrow_copies["narrow"], "--focal-length", str(framing.focal_mm))
     assert "--focal-length" in said and "without its calibration" in said, said
     assert [r["vehicles"] for r in stated] == [r["vehicles"] for r in tagged]
@@ -478,3 +478,35 @@ def test_footage_that_never_shows_its_horizon_is_told(test_video: Path, tmp_path
         assert result.returncode == 0, result.stderr
         said = "vanishing point was never found" in result.stderr
         assert said == told and (not told or "--horizon Y" in result.stderr), result.stderr
+
+
+def test_a_stills_exif_focal_length_sets_its_scale(data_dir: Path, tmp_path: Path) -> None:
+    """A photo whose EXIF gives its lens's focal length in 35 mm terms (as a phone's does) is
+    read as stated with `--focal-length`, with a note; untagged, the shipped lens is assumed
+    and its vehicles read farther (26 mm is a wider lens than the shipped 31)."""
+    from PIL import Image
+
+    still = data_dir / "test_images" / "test1.jpg"
+    tagged = tmp_path / "phone.jpg"
+    with Image.open(still) as image:
+        exif = Image.Exif()
+        exif.get_ifd(0x8769)[0xA405] = 26
+        image.save(tagged, exif=exif, quality=95)
+    plain = tmp_path / "plain.jpg"
+    with Image.open(still) as image:
+        image.save(plain, quality=95)
+
+    def run(image: Path, *options: str) -> tuple[list[float], str]:
+        record = tmp_path / f"{image.stem}{len(options)}.jsonl"
+        out = tmp_path / f"{image.stem}{len(options)}_out.jpg"
+        result = run_cli("process", image, "-o", out, "--json", record, *options)
+        assert result.returncode == 0, result.stderr
+        (row,) = read_record(record)
+        return [v["distance_m"] for v in row["vehicles"]], result.stderr
+
+    read, said = run(tagged)
+    assert "26 mm in 35 mm terms" in said and "without its calibration" in said, said
+    assert read and run(plain, "--focal-length", "26")[0] == read
+    assumed, said = run(plain, "--calibration", "none")
+    assert "35 mm" not in said and len(assumed) == len(read)
+    assert all(r < a for r, a in zip(sorted(read), sorted(assumed), strict=True)), (read, assumed)
