@@ -48,6 +48,28 @@ def test_light_alone_is_no_cut() -> None:
     assert _cuts(road[:10] + darker) == []
 
 
+def _faded(
+    frames: list[NDArray[np.uint8]], weights: NDArray[np.float64]
+) -> list[NDArray[np.uint8]]:
+    return [np.asarray(f * w, np.uint8) for f, w in zip(frames, weights, strict=True)]
+
+
+def test_a_fade_through_black_to_another_shot_is_a_cut() -> None:
+    """An edited video fading out to black and in to another shot over half a second each way
+    moves no frame much, so no frame-to-frame cut is seen; the fade in is found, once, as it
+    ends. A video that starts by fading in from black (a camera starting up) is one shot,
+    and so is a road that darkens and lightens again (a tunnel: never all black)."""
+    road, other = moving_road(SIZE, 20), _other_shot(20)
+    ramp = np.linspace(1, 0, 12)
+    out = _faded(road[8:], ramp)
+    fading = road[:8] + out + [out[-1]] * 2 + _faded(other[:12], ramp[::-1]) + other[12:]
+    cuts = _cuts(fading)
+    assert len(cuts) == 1 and 30 <= cuts[0] <= 34, cuts
+    assert _cuts(_faded(road[:12], ramp[::-1]) + road) == []
+    dim = np.concatenate([np.linspace(1, 0.3, 10), np.linspace(0.3, 1, 10)])
+    assert _cuts(_faded(road, dim)) == []
+
+
 def test_the_same_camera_is_told_by_its_bonnet() -> None:
     """A shot the footage comes back to shows the same bonnet, whatever the road does."""
     first, later = moving_road(SIZE, 30, bonnet=150)[0], moving_road(SIZE, 30, bonnet=150)[29]
