@@ -117,8 +117,7 @@ def lens_note(focal_mm: float | None, tagged: bool, dropped: bool) -> str | None
         return None
     said = (
         f"its file gives its lens's focal length ({focal_mm:g} mm in 35 mm terms, as a phone "
-        "tags it): "
-        "its distances and speed follow it (--focal-length MM overrides it)"
+        "tags it): its distances and speed follow it (--focal-length MM overrides it)"
         if tagged
         else f"a lens of {focal_mm:g} mm in 35 mm terms (--focal-length)"
     )
