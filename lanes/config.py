@@ -40,9 +40,10 @@ class LaneConfig:
     # one: at dusk on concrete (road 62-66) the white dashes read 100-109, under road + 40, and
     # the lane was drawn from the yellow line and a made-up side 30-80 px off (0: always in full).
     white_margin_road: float = 80.0
-    # ... and never below this: darkened to a road of 5 (paint 25-50), floors of 60-65 drew lanes
-    # partly on glare, and moved the night clip's lanes in a third of its frames (see README).
-    white_min_l_dark: float = 90.0
+    # ... and never below this, under which noise passes for paint: a dusk road's white line
+    # reads 66-75 over a road of 2-11 (the wet rural road dimmed), and the shared clips at 0.25
+    # of their light show their paint at 60-65; at 90 neither had a lane (see README).
+    white_min_l_dark: float = 60.0
     yellow_tophat: float = 7.0
     yellow_min_b: float = 140.0
     min_paint_m: float = 0.5  # paint is kept where it runs along the road at least this far
