@@ -129,20 +129,17 @@ def same_camera(
 
 
 class ShotDetector:
-    """History for the cuts: the signatures of the last two frames (`previous`, `current`),
-    and of the shot's last `2 * fade_frames + 1` for a fade in from black (`recent`; `lit`:
-    a frame of the shot before them was a picture, not a dark one)."""
+    """History for the cuts: the signatures of the shot's last `2 * fade_frames + 1` frames
+    (`recent`: the last one's for a cut, all of them for a fade in from black; `lit`: a frame
+    of the shot before them was a picture, not a dark one)."""
 
     def __init__(self, config: ShotConfig | None = None) -> None:
         self.config = config if config is not None else ShotConfig()
-        self.previous: Signature | None = None
-        self.current: Signature | None = None
         self.recent: deque[Signature] = deque()
         self.lit = False
 
     def reset(self) -> None:
         """Forget the last frames: the next one starts the footage."""
-        self.previous = self.current = None
         self.recent.clear()
         self.lit = False
 
@@ -150,16 +147,16 @@ class ShotDetector:
         """Whether `frame` starts a new shot (never the first frame): a cut from the last
         frame, or the end of a fade in from black after a picture."""
         cfg = self.config
-        self.previous, self.current = self.current, signature(frame, cfg)
-        if len(self.recent) == 2 * cfg.fade_frames + 1:
+        current, window = signature(frame, cfg), 2 * cfg.fade_frames + 1
+        cut = bool(self.recent) and is_cut(self.recent[-1], current, cfg)
+        if len(self.recent) == window:
             left = self.recent.popleft()
             self.lit = self.lit or float(left.thumbnail.mean()) >= cfg.black_level
-        self.recent.append(self.current)
-        cut = self.previous is not None and is_cut(self.previous, self.current, cfg)
-        if not cut and self.lit and len(self.recent) == 2 * cfg.fade_frames + 1:
-            cut = is_fade_in(self.recent[0], self.recent[cfg.fade_frames], self.current, cfg)
+        self.recent.append(current)
+        if not cut and self.lit and len(self.recent) == window:
+            cut = is_fade_in(self.recent[0], self.recent[cfg.fade_frames], current, cfg)
         if cut:  # the new shot's frames start here
             self.recent.clear()
-            self.recent.append(self.current)
+            self.recent.append(current)
             self.lit = False
         return cut
