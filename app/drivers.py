@@ -168,6 +168,29 @@ def calibration_for(
     return None
 
 
+def lens_for(
+    calibration: Calibration | None,
+    mounting: Mounting,
+    size: tuple[int, int],
+    tagged_mm: float | None,
+    name: str,
+    required: bool,
+    log: Callable[[str], None],
+) -> tuple[Calibration | None, Mounting]:
+    """The calibration and mounting for `name`'s frames of `size`: the lens's focal length its
+    file's tag states (`tagged_mm`, a phone's) where the user stated none, the calibration that
+    fits (`calibration_for`), and `log` told of a lens known without one (`lens_note`)."""
+    tagged = mounting.focal_mm is None and tagged_mm is not None
+    if tagged:
+        mounting = replace(mounting, focal_mm=tagged_mm)
+    dropped = mounting.focal_mm is not None and calibration is not None and not required
+    calibration = calibration_for(calibration, size, name, required, log, mounting.focal_mm)
+    # A calibration the user named sets the lens, whatever the tag says.
+    if (lens := lens_note(mounting.focal_mm, tagged and calibration is None, dropped)) is not None:
+        log(f"note: {name}: {lens}")
+    return calibration, mounting
+
+
 def camera_for(
     calibration: Calibration | None,
     mounting: Mounting,
@@ -176,17 +199,10 @@ def camera_for(
     required: bool,
     log: Callable[[str], None],
 ) -> tuple[Calibration | None, Mounting]:
-    """The calibration and mounting to process the video `info` describes with: the mounting
-    checked against it and given the lens its tag states (`video_mounting`), the calibration
-    that fits (`calibration_for`), and `log` told of a lens known without one (`lens_note`)."""
-    tagged = mounting.focal_mm is None and info.focal_mm is not None
+    """`lens_for` the video `info` describes, its mounting checked against it first
+    (`video_mounting`)."""
     mounting = video_mounting(mounting, info)
-    dropped = mounting.focal_mm is not None and calibration is not None and not required
-    calibration = calibration_for(calibration, info.size, name, required, log, mounting.focal_mm)
-    # A calibration the user named sets the lens, whatever the tag says.
-    if (lens := lens_note(mounting.focal_mm, tagged and calibration is None, dropped)) is not None:
-        log(f"note: {name}: {lens}")
-    return calibration, mounting
+    return lens_for(calibration, mounting, info.size, info.focal_mm, name, required, log)
 
 
 def process_video(
@@ -331,13 +347,10 @@ def process_still(
     size = (image.shape[1], image.shape[0])
     mounting = mounting or Mounting()
     check_mounting(mounting, size)
-    tagged = mounting.focal_mm is None and (focal := image_focal_mm(source)) is not None
-    if tagged:
-        mounting = replace(mounting, focal_mm=focal)
     started = time.perf_counter()
-    if (lens := lens_note(mounting.focal_mm, tagged, calibration is not None)) is not None:
-        log(f"note: {source.name}: {lens}")
-    calibration = calibration_for(calibration, size, source.name, False, log, mounting.focal_mm)
+    calibration, mounting = lens_for(
+        calibration, mounting, size, image_focal_mm(source), source.name, False, log
+    )
     with Pipeline(calibration, lanes, vehicles, mounting=mounting) as pipeline:
         pipeline.prepare(size)
         out = pipeline.run(image)

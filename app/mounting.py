@@ -146,8 +146,6 @@ def check_mounting(mounting: Mounting, size: tuple[int, int] | None = None) -> N
 
 def video_mounting(mounting: Mounting, info: VideoInfo) -> Mounting:
     """A user's mounting checked against a video, its horizon (a row of the video as stored)
-    as a row of the frames processed (`within_size` may have reduced them), and the lens's
-    focal length the video's tag gives where the user stated none."""
+    as a row of the frames processed (`within_size` may have reduced them)."""
     check_mounting(mounting, info.reduced_from or info.size)
-    focal_mm = mounting.focal_mm if mounting.focal_mm is not None else info.focal_mm
-    return replace(mounting, horizon_y=reduced_row(mounting.horizon_y, info), focal_mm=focal_mm)
+    return replace(mounting, horizon_y=reduced_row(mounting.horizon_y, info))
