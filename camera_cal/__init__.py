@@ -1,5 +1,5 @@
 """Camera calibration from chessboard photos, per-frame undistortion, and the scene geometry
-(live picture and horizon) read off the footage."""
+(live picture and horizon) and the camera's roll read off the footage."""
 
 from camera_cal.calibration import (
     Calibration,
@@ -11,6 +11,7 @@ from camera_cal.calibration import (
     load_calibration,
     save_calibration,
 )
+from camera_cal.level import LevelConfig, RollReading
 from camera_cal.scene import (
     GroundScale,
     SceneGeometry,
@@ -34,6 +35,8 @@ __all__ = [
     "CalibrationError",
     "CalibrationMismatch",
     "GroundScale",
+    "LevelConfig",
+    "RollReading",
     "SceneGeometry",
     "SceneTracker",
     "ShotDetector",
