@@ -240,6 +240,7 @@ FRAME_COLUMNS = (
     ("horizon_y", "double"),
     ("ground_scale", "double"),
     ("rear", "bool"),  # a rear camera's frame (the record's facing)
+    ("roll_deg", "double"),  # the turn the frame was levelled by (stated or read; 0: none)
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -297,6 +298,7 @@ def write_table_parts(
             "horizon_y": r.get("horizon_y"),
             "ground_scale": r.get("ground_scale"),
             "rear": seen_from_behind(r),
+            "roll_deg": r.get("roll_deg", 0.0),
         }
         for r in rows
     ]

@@ -66,13 +66,14 @@ CameraHeightOption = Annotated[
     ),
 ]
 RollOption = Annotated[
-    float,
+    float | None,
     typer.Option(
         "--roll",
         metavar="DEG",
         help="The picture's tilt from a camera mounted askew, in degrees: positive when it is "
         "turned anticlockwise (the horizon rises to the right). The frames are levelled, the "
-        "output and the record too.",
+        "output and the record too (default: read off the vehicles' rear edges, and levelled "
+        "from when they agree; 0: level).",
     ),
 ]
 
@@ -134,7 +135,7 @@ def _mounting(
     horizon: float | None,
     camera_height: float | None,
     traffic: str,
-    roll: float,
+    roll: float | None,
     facing: str,
     focal_length: float | None,
     calibration: str,
@@ -341,7 +342,7 @@ def process_command(
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
-    roll: RollOption = 0.0,
+    roll: RollOption = None,
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
 ) -> None:
@@ -424,7 +425,7 @@ def batch_command(
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
-    roll: RollOption = 0.0,
+    roll: RollOption = None,
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
 ) -> None:
@@ -468,7 +469,7 @@ def debug_command(
     camera_height: CameraHeightOption = None,
     traffic: TrafficOption = "right",
     max_size: MaxSizeOption = DEFAULT_MAX_SIZE,
-    roll: RollOption = 0.0,
+    roll: RollOption = None,
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
 ) -> None:
@@ -542,7 +543,15 @@ def report_command(
         typer.Option(help="The video the record was made from, for a thumbnail per event."),
     ] = None,
     calibration: CalibrationOption = DEFAULT_CALIBRATION,
-    roll: RollOption = 0.0,
+    roll: Annotated[
+        float | None,
+        typer.Option(
+            "--roll",
+            metavar="DEG",
+            help="The turn 'process' levelled the picture by, in degrees anticlockwise, for the "
+            "thumbnails (default: the record's, stated or read off the footage).",
+        ),
+    ] = None,
 ) -> None:
     """Write a self-contained HTML report: plots over time and the events with thumbnails."""
     from app.events import find_events, signals_from_record

@@ -102,6 +102,18 @@ def facing_note(stated: bool | None, seen: bool | None) -> str | None:
     )
 
 
+def levelled_note(roll_deg: float, frame: int, fps: float) -> str:
+    """What to tell of a picture levelled by a turn its vehicles' rear edges read (see
+    `camera_cal.level`), from `frame` of a video at `fps` on."""
+    way = "anticlockwise" if roll_deg > 0 else "clockwise"
+    return (
+        f"its picture is turned {abs(roll_deg):.1f} degrees {way} (the vehicles' rear edges "
+        f"lean so, as a camera mounted askew turns them): levelled from {frame / fps:.1f} s on "
+        f"(the output and the record with it); pass --roll {roll_deg:g} to level it from the "
+        "start, or --roll 0 to leave it as it is"
+    )
+
+
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
 MONOCHROME_NOTE = (
     "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
@@ -306,6 +318,8 @@ def process_video(
         facing = facing_note(mounting.rear, pipeline.facing_seen)
         if facing is not None:
             log(f"note: {source.name} is {facing}")
+        if pipeline.levelled is not None:
+            log(f"note: {source.name}: {levelled_note(*pipeline.levelled, info.fps)}")
         if count and (horizon := pipeline.horizon_note()) is not None:
             log(f"note: {source.name}: {horizon}")
         height = pipeline.height_note(float(np.median(scales))) if scales else None

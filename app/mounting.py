@@ -19,7 +19,8 @@ class Mounting:
     the tuned camera would give: the horizon row (None: estimated from the footage), the height
     over the road in metres (None: a car's; sizes the vehicle windows), traffic keeping left
     (the vehicle stage sees every frame mirrored and its boxes come back mirrored,
-    app/traffic.py), the picture's turn in degrees anticlockwise (levelled with the lens) and
+    app/traffic.py), the picture's turn in degrees anticlockwise (levelled with the lens; None:
+    read off the vehicles' rear edges, `camera_cal.level`, and levelled from then on) and
     which way the camera looks (`FACINGS`: "auto" reads it from the road's motion,
     `app.facts.Facing`; "rear" is a rear camera's file as its lens sees the road, its sides
     swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one saved mirrored,
@@ -30,7 +31,7 @@ class Mounting:
     horizon_y: float | None = None
     camera_height_m: float | None = None
     keep_left: bool = False
-    roll_deg: float = 0.0
+    roll_deg: float | None = None
     facing: str = "auto"
     focal_mm: float | None = None
 
@@ -99,9 +100,9 @@ def camera_height_note(
 MAX_ROLL_DEG = 30.0
 
 
-def check_roll(roll_deg: float) -> None:
-    """A user's roll must be a tilt a mounted dashcam can have."""
-    if not abs(roll_deg) <= MAX_ROLL_DEG:
+def check_roll(roll_deg: float | None) -> None:
+    """A user's roll must be a tilt a mounted dashcam can have (None: not stated)."""
+    if roll_deg is not None and not abs(roll_deg) <= MAX_ROLL_DEG:
         raise InputError(
             f"--roll {roll_deg:g} is not a dashcam's tilt; pass degrees from "
             f"{-MAX_ROLL_DEG:g} to {MAX_ROLL_DEG:g} (positive: the picture turned anticlockwise, "

@@ -28,6 +28,7 @@ from app.workers import StageWorker
 from camera_cal import (
     Calibration,
     GroundScale,
+    RollReading,
     SceneGeometry,
     SceneTracker,
     ShotDetector,
@@ -61,6 +62,7 @@ class FrameResult:
     scene: SceneGeometry | None = None  # live picture and horizon as of this frame
     timings_ms: dict[str, float] = field(default_factory=dict)
     shot: int = 0  # shots before this frame's: 0 until the footage's first cut
+    roll_deg: float = 0.0  # the turn levelled away in this frame (stated, or read: see Pipeline)
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +100,7 @@ class _Started:
     held: bool = False  # the stages waited for the horizon: they did not see this frame
     index: int = 0  # frames started before it since `prepare`
     cut: bool = False  # the first frame of another shot (see `camera_cal.shots`)
+    roll_deg: float = 0.0  # the turn levelled away in this frame
 
 
 class Pipeline:
@@ -115,6 +118,12 @@ class Pipeline:
     clip does: the stages forget their history, and the scene is measured afresh unless the
     same camera goes on (see `_scene_after_cut`); the vehicle ids go on counting, and the
     driving events under way end at the cut.
+
+    A picture whose turn the user did not state is read for one from its vehicles' rear edges
+    (`camera_cal.RollReading`); once they agree on a turn, the frames are levelled by it from
+    the next one started (`levelled`). The stages and the scene go on with their history,
+    which the turn moves by a few pixels: started over, as at a cut, the turned shared clips
+    lost more frames to it than they gained (README).
     """
 
     def __init__(
@@ -159,6 +168,11 @@ class Pipeline:
         self._last_id = 0
         self.cuts: list[int] = []  # frame numbers where a new shot started
         self._horizon_found = False  # the footage showed its horizon in some frame
+        self._roll = 0.0  # the turn the frames are levelled by
+        self._level: RollReading | None = None  # the turn read while none is stated or read
+        self._relevel: float | None = None  # a turn read, to level by from the next frame
+        # The turn read off the footage and the frame from which it was levelled, if any.
+        self.levelled: tuple[float, int] | None = None
 
     def __enter__(self) -> Pipeline:
         return self
@@ -182,7 +196,11 @@ class Pipeline:
 
         Raises `camera_cal.CalibrationMismatch` when the calibration does not fit the size.
         """
-        self._undistorter = undistorter_for(self.calibration, size, self.mounting.roll_deg)
+        self._roll = self.mounting.roll_deg or 0.0
+        self._undistorter = undistorter_for(self.calibration, size, self._roll)
+        # A still has too few vehicles to read a turn from.
+        self._level = RollReading() if self.mounting.roll_deg is None and fps > 0 else None
+        self._relevel, self.levelled = None, None
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
@@ -349,9 +367,28 @@ class Pipeline:
         while pending:
             yield self._finish(pending.popleft())
 
+    def _start_over(self, index: int) -> None:
+        """The stages forget their history from the frame started as `index` on."""
+        self._shot_start = index
+        if self.lanes is not None:
+            self.lanes.reset(self._fps)
+        if self._worker is not None:
+            self._worker.reset_before_next(self._fps)
+        elif self.vehicles is not None:
+            self.vehicles.reset(self._fps)
+
+    def _level_anew(self) -> None:
+        """Level the frames by a turn read off the footage, from this frame on."""
+        if self._relevel is None or self.size is None:
+            return
+        self._roll, self._relevel = self._relevel, None
+        self._undistorter = undistorter_for(self.calibration, self.size, self._roll)
+        self.levelled = (self._roll, self._frame + (1 if self._worker is not None else 0))
+
     def _start(self, frame: Frame) -> _Started:
         """Undistort, hand the frame to the worker, and run the scene and the lanes here."""
         t0 = time.perf_counter()
+        self._level_anew()
         undistorted = self.undistort(frame)
         timings = {"undistort": (time.perf_counter() - t0) * 1000}
         assert self._scene is not None and self.size is not None
@@ -360,13 +397,9 @@ class Pipeline:
         cut = self._shots.update(undistorted) and self._fps > 0
         if cut:  # another shot: its scene measured afresh, the stages' history forgotten
             self._scene = self._scene_after_cut(undistorted, self._scene)
-            self._shot_start = index
-            if self.lanes is not None:
-                self.lanes.reset(self._fps)
-            if self._worker is not None:
-                self._worker.reset_before_next(self._fps)
-            elif self.vehicles is not None:
-                self.vehicles.reset(self._fps)
+            if self._level is not None:
+                self._level.reset()
+            self._start_over(index)
         scene = self._scene.update(undistorted, frame)
         self._horizon_found = self._horizon_found or scene.estimated
         self._last = (undistorted, scene)
@@ -376,7 +409,9 @@ class Pipeline:
         self._started += 1
         if held:
             waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
-            return _Started(undistorted, scene, placement, waiting, timings, True, index, cut)
+            return _Started(
+                undistorted, scene, placement, waiting, timings, True, index, cut, self._roll
+            )
         if self._worker is not None:
             self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
         lane = None
@@ -391,7 +426,16 @@ class Pipeline:
             )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
-        return _Started(undistorted, scene, placement, lane, timings, False, index, cut)
+        return _Started(undistorted, scene, placement, lane, timings, False, index, cut, self._roll)
+
+    def _read_roll(self, undistorted: Frame, detections: Detections) -> None:
+        """Take in the leans of a frame's tracked vehicles; once they read a turn, level the
+        frames by it from the next one started (once: the reading then stops)."""
+        if self._level is None or not len(detections):
+            return
+        turn = self._level.update(undistorted, detections.boxes[detections.ids > 0])
+        if turn is not None:
+            self._relevel, self._level = self._roll + turn, None
 
     def _numbered(self, found: VehicleResult) -> VehicleResult:
         """`found` with its track ids after those of the earlier shots (each shot's tracker
@@ -440,6 +484,7 @@ class Pipeline:
         if vehicles is not None:
             vehicles = self._numbered(vehicles)
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
+            self._read_roll(undistorted, vehicles.detections)
         facts = None
         # Metres follow the warp placed from the scene: the lane stage's, or without it the
         # default lane config's for the same placement.
@@ -486,5 +531,7 @@ class Pipeline:
             )
         self._frame += 1
         shot = len(self.cuts)
-        result = FrameResult(lane, vehicles, facts, events, started.scene, timings, shot)
+        result = FrameResult(
+            lane, vehicles, facts, events, started.scene, timings, shot, started.roll_deg
+        )
         return FrameOutput(undistorted, result)

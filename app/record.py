@@ -67,6 +67,8 @@ def frame_record(
         "size": list(size),
         "shot": result.shot,
     }
+    if result.roll_deg:
+        record["roll_deg"] = round(result.roll_deg, 1)
     if result.scene is not None:
         record["horizon_y"] = round(result.scene.horizon_y, 1)
         record["vanishing_x"] = _rounded(result.scene.vanishing_x, 1)
