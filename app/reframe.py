@@ -52,8 +52,10 @@ class Framing:
     (a road where traffic keeps right, seen as one where it keeps left); `keep_left`: roadview
     is told so (`--traffic left`); `light`: every pixel value times this (0.4: dusk, the
     asphalt at about 30 grey levels); `roll`: last, the picture turned this many degrees
-    anticlockwise about its centre, as by a camera mounted askew, and roadview told so
-    (`--roll`): its output is levelled back, so the labels stay where they are; `reverse`: the
+    anticlockwise about its centre, as by a camera mounted askew; `roll_stated`: the turn
+    roadview is told (`--roll`; None: it reads one off the vehicles' rear edges, as by default,
+    and levels the frames by it from then on): each frame's labels are turned by what is left
+    of the turn in roadview's output (none where it was told the copy's); `reverse`: the
     frames played backwards, the road moving away as a rear camera films it (with `mirror`, its
     sides swapped too, as a rear camera's lens sees them; without, as its file saved mirrored
     shows them); `facing`: what roadview is told of that (`--facing`); `focal_mm`: the copy
@@ -68,6 +70,7 @@ class Framing:
     keep_left: bool = False
     light: float = 1.0
     roll: float = 0.0
+    roll_stated: float | None = None
     reverse: bool = False
     facing: str = "auto"
     focal_mm: float | None = None
@@ -163,7 +166,7 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("twice the frame rate", rate=2.0),
         Framing("mirrored", mirror=True),
         Framing("mirrored, --traffic left", mirror=True, keep_left=True),
-        Framing("turned 3°, --roll 3", roll=3.0),
+        Framing("turned 3°, --roll 3", roll=3.0, roll_stated=3.0),
     )
 
 
@@ -204,6 +207,17 @@ def dusk_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
             light=0.4,
         ),
     )
+
+
+# A camera mounted askew that roadview is not told of: turned 3 degrees either way, the turn read
+# off the vehicles' rear edges and levelled from then on, and the same told `--roll 0` (as
+# roadview was before it read the turn).
+UNTOLD_ROLL_FRAMINGS = (
+    Framing("turned 3°, read", roll=3.0),
+    Framing("turned 3°, --roll 0", roll=3.0, roll_stated=0.0),
+    Framing("turned -3°, read", roll=-3.0),
+    Framing("turned -3°, --roll 0", roll=-3.0, roll_stated=0.0),
+)
 
 
 # A rear camera on a clip: played backwards and mirrored (the road moving away, its sides swapped
@@ -340,6 +354,55 @@ def tag_focal_length(video: Path, focal_mm: float) -> None:
     tagged.replace(video)
 
 
+def turned_labels(
+    labels: Mapping[int, FrameLabels],
+    turns: Mapping[int, float],
+    size: tuple[int, int],
+    centre: tuple[float, float] | None = None,
+) -> dict[int, FrameLabels]:
+    """Per-frame labels of a picture of `size` with frame k turned `turns[k]` degrees
+    anticlockwise about `centre` (None: the picture's, as `reframe_image` turns it): each box
+    becomes the bounds of its turned corners less half their growth (a car is no rectangle),
+    each lane side is read off its turned points at its rows."""
+    w, h = size
+    about = centre if centre is not None else ((w - 1) / 2, (h - 1) / 2)
+    out = {}
+    for k, frame in labels.items():
+        turn = turns.get(k, 0.0)
+        if not turn:
+            out[k] = frame
+            continue
+        matrix = cv2.getRotationMatrix2D(about, turn, 1.0)
+        vehicles = []
+        for vehicle in frame.vehicles:
+            x0, y0, x1, y1 = vehicle.box
+            corners = np.array([[x0, y0, 1], [x1, y0, 1], [x0, y1, 1], [x1, y1, 1]]) @ matrix.T
+            lo, hi = corners.min(axis=0), corners.max(axis=0)
+            gx, gy = ((hi[0] - lo[0]) - (x1 - x0)) / 4, ((hi[1] - lo[1]) - (y1 - y0)) / 4
+            box = (
+                float(max(lo[0] + gx, 0.0)),
+                float(max(lo[1] + gy, 0.0)),
+                float(min(hi[0] - gx, w)),
+                float(min(hi[1] - gy, h)),
+            )
+            vehicles.append(replace(vehicle, box=box))
+        lane: dict[str, dict[int, float]] = {}
+        for side, points in frame.lane.items():
+            if len(points) < 2:
+                lane[side] = {}
+                continue
+            rows = np.array(sorted(points), np.float64)
+            xs = np.array([points[int(r)] for r in rows])
+            moved = np.column_stack([xs, rows, np.ones(len(rows))]) @ matrix.T
+            order = np.argsort(moved[:, 1])
+            ys, mx = moved[order, 1], moved[order, 0]
+            lane[side] = {
+                int(r): float(np.interp(r, ys, mx)) for r in rows if ys[0] <= r <= ys[-1]
+            }
+        out[k] = FrameLabels(tuple(vehicles), lane)
+    return out
+
+
 def retime_labels(
     labels: Mapping[int, FrameLabels], framing: Framing, source_frames: int
 ) -> dict[int, FrameLabels]:
@@ -377,12 +440,15 @@ def framing_scores(
         vehicles_in_worker=False,
         mounting=Mounting(
             keep_left=framing.keep_left,
-            roll_deg=framing.roll,
+            roll_deg=framing.roll_stated,
             facing=framing.facing,
         ),
     )
     truth = retime_labels(load_labels_document(document), framing, info.n_frames)
     frames = list(read_record(record))
+    if framing.roll:  # each frame as turned as roadview left it
+        left = {int(f["frame"]): framing.roll - float(f.get("roll_deg", 0.0)) for f in frames}
+        truth = turned_labels(truth, left, framing.output_size(info.size))
     # The warm-up is the labels' 10 frames of the clip as it is, whatever the frame rate.
     return {**evaluate(truth, frames, warmup=round(10 * framing.rate)), "frames": frames}
 

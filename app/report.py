@@ -30,7 +30,7 @@ from app.events import (
 )
 from app.record import read_record_lines
 from app.sources import probe_video, read_frames
-from camera_cal import Calibration, fits, undistorter_for
+from camera_cal import Calibration, Undistorter, fits, undistorter_for
 
 PLOT_W, PLOT_H = 860, 170
 MARGIN_L, MARGIN_R, MARGIN_T, MARGIN_B = 58, 12, 26, 26
@@ -329,15 +329,22 @@ def read_events(path: Path) -> list[Event]:
     return sorted(events, key=lambda e: (e.start_s, e.kind))
 
 
+def _record_roll(row: Mapping[str, Any]) -> float:
+    """The turn a record's frame was levelled by (0: none)."""
+    turn = row.get("roll_deg", 0.0)
+    return float(turn) if isinstance(turn, int | float) else 0.0
+
+
 def event_thumbnails(
     video: Path,
     rows: Sequence[Mapping[str, Any]],
     events: Sequence[Event],
     calibration: Calibration | None,
-    roll_deg: float = 0.0,
+    roll_deg: float | None = None,
 ) -> dict[int, str]:
     """A thumbnail per event: the video's frame in the middle of the event, undistorted (and
-    levelled by `roll_deg`) as `process` did, with the involved vehicle's box from the record."""
+    levelled by `roll_deg`, or by the record's turn at that frame) as `process` did, with the
+    involved vehicle's box from the record."""
     info = probe_video(video)
     size = tuple(rows[0].get("size", info.size))
     if tuple(info.size) != size:
@@ -349,8 +356,8 @@ def event_thumbnails(
     # calibration out (`app.drivers.calibration_for`).
     fitting = calibration is not None and fits(calibration, info.size)
     lens = calibration if fitting and info.focal_mm is None else None
-    undistort = undistorter_for(lens, info.size, roll_deg)
     by_frame = {int(r["frame"]): r for r in rows}
+    undistorters: dict[float, Undistorter | None] = {}  # one per turn levelled by
     thumbnails = {}
     for k, event in enumerate(events):
         index = (event.start_frame + event.end_frame) // 2
@@ -360,7 +367,10 @@ def event_thumbnails(
                 f"--video {video} has no frame {index} (the event at {event.start_s:.2f} s); "
                 "pass the video the record was made from"
             )
-        if undistort is not None:
+        turn = roll_deg if roll_deg is not None else _record_roll(by_frame.get(index, {}))
+        if turn not in undistorters:
+            undistorters[turn] = undistorter_for(lens, info.size, turn)
+        if (undistort := undistorters[turn]) is not None:
             frame = undistort(frame)
         box = next(
             (

@@ -25,6 +25,7 @@ from app.pipeline import Pipeline
 from app.record import read_record
 from app.reframe import (
     REAR_FRAMINGS,
+    UNTOLD_ROLL_FRAMINGS,
     Framing,
     dusk_framings,
     framing_table,
@@ -315,6 +316,7 @@ def quality(data: Path, report: dict[str, Any]) -> None:
     source = probe_video(clips[0][0]).size
     framings = [
         *standard_framings(source),
+        *UNTOLD_ROLL_FRAMINGS,
         tagged_lens_framing(source, calibration),
         upright_framing(source),
         *dusk_framings(source),

@@ -20,6 +20,7 @@ from app.reframe import (
     reframe_labels,
     retime_labels,
     standard_framings,
+    turned_labels,
     upright_framing,
     write_reframed,
 )
@@ -63,8 +64,9 @@ def test_labels_move_with_the_picture(framing: Framing) -> None:
     frame[400:520, 500:700] = 255
     frame[596:605, 376:385] = 255  # the lane point (380, 600)
     moved = reframe_image(frame, framing)
-    if framing.roll:  # roadview is told: it levels the picture, where the labels stay
-        moved = build_undistorter(None, framing.output_size((1280, 720)), framing.roll)(moved)
+    if framing.roll_stated:  # roadview is told: it levels the picture, where the labels stay
+        size = framing.output_size((1280, 720))
+        moved = build_undistorter(None, size, framing.roll_stated)(moved)
     labels = reframe_labels(_labels(box, {"600": 380}), framing, (1280, 720))
     keyframe = labels["keyframes"]["0"]
     assert moved.shape[:2][::-1] == framing.output_size((1280, 720))
@@ -106,6 +108,43 @@ def test_a_vehicle_cut_by_the_crop_is_ignored_and_one_outside_dropped() -> None:
     assert set(vehicles) == {1, 3}
     assert vehicles[1]["box"] == [0, 400, 60, 480] and vehicles[1]["ignore"]
     assert vehicles[3]["box"] == [160, 400, 260, 480] and not vehicles[3]["ignore"]
+
+
+@pytest.mark.parametrize("turn", [-3.0, 0.7, 3.0])
+def test_labels_turn_with_a_picture_as_roadview_left_it_turned(turn: float) -> None:
+    """A white box and a white lane line, turned `turn` degrees as `reframe_image` turns a
+    picture: the turned labels' box has the white's centre and lies inside its bounds (less
+    half their growth: a car is no rectangle), the lane is where the white line crosses each
+    labelled row; a frame left level keeps its labels."""
+    frame = np.zeros((720, 1280, 3), np.uint8)
+    frame[400:520, 500:700] = 255
+    lane_only = np.zeros_like(frame)
+    rows = range(470, 671, 40)
+    for row in range(440, 700):  # x = 300 + (670 - row): the line leans left going up
+        lane_only[row, 300 + (670 - row) - 3 : 300 + (670 - row) + 4] = 255
+    labels = {
+        0: FrameLabels(
+            (LabelledVehicle(1, (500.0, 400.0, 700.0, 520.0), False),),
+            {"left": {row: 300.0 + (670 - row) for row in rows}, "right": {}},
+        ),
+        1: FrameLabels((), {"left": {}, "right": {}}),
+    }
+    framing = Framing("turned", roll=turn)
+    box_picture, lane_picture = reframe_image(frame, framing), reframe_image(lane_only, framing)
+    moved = turned_labels(labels, {0: turn, 1: 0.0}, (1280, 720))
+    assert moved[1] is labels[1]
+    (vehicle,) = moved[0].vehicles
+    white = np.argwhere(box_picture[..., 0] > 127)
+    (y0, x0), (y1, x1) = white.min(axis=0), white.max(axis=0) + 1
+    bx0, by0, bx1, by1 = vehicle.box
+    assert abs((bx0 + bx1) / 2 - (x0 + x1) / 2) < 1.5 and abs((by0 + by1) / 2 - (y0 + y1) / 2) < 1.5
+    assert x0 - 1 <= bx0 and bx1 <= x1 + 1 and y0 - 1 <= by0 and by1 <= y1 + 1
+    assert bx1 - bx0 >= 200 - 1 and by1 - by0 >= 120 - 1
+    lane = moved[0].lane["left"]
+    assert len(lane) >= 4, lane
+    for row, x in lane.items():
+        xs = np.flatnonzero(lane_picture[row, :, 0] > 127)
+        assert abs(x - xs.mean()) < 1.5, (row, x, xs.mean())
 
 
 @pytest.mark.slow

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import html.parser
 import json
 import os
@@ -168,3 +169,34 @@ def test_report_problems_are_one_line(tmp_path: Path, test_video: Path) -> None:
     assert not page.exists()
     done = run_cli("report", record)
     assert done.returncode == 0 and (tmp_path / "r_report.html").exists()
+
+
+def test_thumbnails_are_levelled_as_the_record_was(tmp_path: Path) -> None:
+    """An event's thumbnail is the video's frame levelled by the turn the record says `process`
+    levelled it by (its `roll_deg`, read off the footage), as with `--roll` stated: a level
+    white bar of a picture turned 5 degrees comes out level; `--roll` overrides the record."""
+    from app.report import event_thumbnails
+    from app.sinks import VideoSink
+
+    level = np.full((360, 640, 3), 60, np.uint8)
+    level[170:190, 120:520] = 255
+    turn = cv2.getRotationMatrix2D((319.5, 179.5), 5.0, 1.0)
+    turned = cv2.warpAffine(level, turn, (640, 360))
+    video = tmp_path / "turned.mp4"
+    with VideoSink(video, (640, 360), 25.0, preset="medium") as sink:
+        for _ in range(30):
+            sink.write(turned)
+    event = Event("lane_departure", 10, 20, 0.4, 0.8)
+    rows = _rows(30)
+    read = [{**row, "roll_deg": 5.0} if row["frame"] >= 5 else row for row in rows]
+
+    def bar_lean(uri: str) -> float:
+        """The lean in degrees (rising to the right) of the thumbnail's white bar."""
+        data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
+        grey: np.ndarray = np.asarray(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE))
+        ys, xs = np.nonzero(grey > 200)
+        return float(-np.degrees(np.arctan(np.polyfit(xs, ys, 1)[0])))
+
+    assert abs(bar_lean(event_thumbnails(video, read, [event], None)[0])) < 0.5
+    assert abs(bar_lean(event_thumbnails(video, rows, [event], None)[0]) - 5.0) < 0.5
+    assert abs(bar_lean(event_thumbnails(video, read, [event], None, 0.0)[0]) - 5.0) < 0.5
