@@ -56,12 +56,13 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
     return compose(frame, shown, [BoxAnnotator(color)])
 
 
-def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
+def scene_picture(frame: Frame, scene: SceneGeometry, roll_deg: float = 0.0) -> Frame:
     """The scene geometry on the frame: the live box (green; its bottom is labelled when a
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
-    --horizon) with the ground scale once it moved from 1, the road's vanishing point on it (a
-    circle, once estimated), the boxes of burnt-in captions (red), and the road's grey level
-    and grain once measured."""
+    --horizon) with the ground scale once it moved from 1 and the turn the frame was levelled
+    by (`roll_deg`, stated or read), the road's vanishing point on it (a circle, once
+    estimated), the boxes of burnt-in captions (red), and the road's grey level and grain once
+    measured."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -71,6 +72,8 @@ def scene_picture(frame: Frame, scene: SceneGeometry) -> Frame:
     label = "horizon (estimated)" if scene.estimated else "horizon (default)"
     if scene.ground_scale != 1.0:
         label += f", ground scale {scene.ground_scale:.2f}"
+    if roll_deg:
+        label += f", levelled by {roll_deg:g} deg"
     cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.vanishing_x is not None:
         cv2.circle(picture, (round(scene.vanishing_x), y), 9, color, 2, cv2.LINE_AA)
@@ -93,7 +96,7 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
     """Named pictures of every intermediate of one processed frame, in pipeline order."""
     pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
     if out.result.scene is not None:
-        pictures["scene"] = scene_picture(out.undistorted, out.result.scene)
+        pictures["scene"] = scene_picture(out.undistorted, out.result.scene, out.result.roll_deg)
     lane = out.result.lane
     if lane is not None and lane.debug is not None:
         pictures["lane_mask"] = (lane.debug.mask * 255).astype(np.uint8)

@@ -369,7 +369,8 @@ def test_debug_of_an_unknown_camera_runs_long_enough_to_place_its_stages(
 
 
 def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
-    """The ground scale is drawn with the horizon once it moved from the tuned camera's 1."""
+    """The ground scale is drawn with the horizon once it moved from the tuned camera's 1, and
+    so is a turn the frame was levelled by."""
     from dataclasses import replace
 
     from app.debug import scene_picture
@@ -380,6 +381,8 @@ def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     higher = scene_picture(frame, replace(scene, ground_scale=0.67))
     label = (slice(100, 150), slice(0, 640))  # the text above the horizon row
     assert (higher[label] > 0).sum() > 1.3 * (tuned[label] > 0).sum()
+    levelled = scene_picture(frame, scene, 2.5)
+    assert (levelled[label] > 0).sum() > 1.3 * (tuned[label] > 0).sum()
 
 
 def test_the_road_ahead_is_measured_for_its_lightness_not_the_sky_or_bonnet() -> None:
