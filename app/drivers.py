@@ -320,6 +320,14 @@ def process_video(
             log(f"note: {source.name} is {facing}")
         if pipeline.levelled is not None:
             log(f"note: {source.name}: {levelled_note(*pipeline.levelled, info.fps)}")
+        if pipeline.roll_contradicted is not None:
+            stated = mounting.roll_deg or 0.0
+            log(
+                f"note: {source.name}: stated --roll {stated:g}, but its vehicles' rear edges "
+                f"still lean once levelled so: they read a turn of {pipeline.roll_contradicted:g} "
+                f"degrees; pass --roll {pipeline.roll_contradicted:g}, or leave --roll out to "
+                "have it read and levelled"
+            )
         if count and (horizon := pipeline.horizon_note()) is not None:
             log(f"note: {source.name}: {horizon}")
         height = pipeline.height_note(float(np.median(scales))) if scales else None

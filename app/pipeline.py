@@ -121,9 +121,10 @@ class Pipeline:
 
     A picture whose turn the user did not state is read for one from its vehicles' rear edges
     (`camera_cal.RollReading`); once they agree on a turn, the frames are levelled by it from
-    the next one started (`levelled`). The stages and the scene go on with their history,
-    which the turn moves by a few pixels: started over, as at a cut, the turned shared clips
-    lost more frames to it than they gained (README).
+    the next one started (`levelled`). A stated turn stands; where the edges still lean after
+    it, the turn they imply is kept for a note (`roll_contradicted`). The stages and the scene
+    go on with their history, which the turn moves by a few pixels: started over, as at a cut,
+    the turned shared clips lost more frames to it than they gained (README).
     """
 
     def __init__(
@@ -169,10 +170,13 @@ class Pipeline:
         self.cuts: list[int] = []  # frame numbers where a new shot started
         self._horizon_found = False  # the footage showed its horizon in some frame
         self._roll = 0.0  # the turn the frames are levelled by
-        self._level: RollReading | None = None  # the turn read while none is stated or read
+        self._level: RollReading | None = None  # the edges' lean, read until it is known
         self._relevel: float | None = None  # a turn read, to level by from the next frame
         # The turn read off the footage and the frame from which it was levelled, if any.
         self.levelled: tuple[float, int] | None = None
+        # The turn the edges imply where the user stated another (None: they agree, or too
+        # few edges to tell).
+        self.roll_contradicted: float | None = None
 
     def __enter__(self) -> Pipeline:
         return self
@@ -199,8 +203,8 @@ class Pipeline:
         self._roll = self.mounting.roll_deg or 0.0
         self._undistorter = undistorter_for(self.calibration, size, self._roll)
         # A still has too few vehicles to read a turn from.
-        self._level = RollReading() if self.mounting.roll_deg is None and fps > 0 else None
-        self._relevel, self.levelled = None, None
+        self._level = RollReading() if fps > 0 else None
+        self._relevel, self.levelled, self.roll_contradicted = None, None, None
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
@@ -430,12 +434,18 @@ class Pipeline:
 
     def _read_roll(self, undistorted: Frame, detections: Detections) -> None:
         """Take in the leans of a frame's tracked vehicles; once they read a turn, level the
-        frames by it from the next one started (once: the reading then stops)."""
+        frames by it from the next one started, or, where the user stated the turn, keep the
+        one they imply for a note (once: the reading then stops)."""
         if self._level is None or not len(detections):
             return
         turn = self._level.update(undistorted, detections.boxes[detections.ids > 0])
-        if turn is not None:
-            self._relevel, self._level = self._roll + turn, None
+        if turn is None:
+            return
+        self._level = None
+        if self.mounting.roll_deg is None:
+            self._relevel = self._roll + turn
+        else:
+            self.roll_contradicted = round(self._roll + turn, 1)
 
     def _numbered(self, found: VehicleResult) -> VehicleResult:
         """`found` with its track ids after those of the earlier shots (each shot's tracker

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 from dataclasses import replace
 from pathlib import Path
@@ -305,8 +306,8 @@ def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
     one on are levelled by it (the record's `roll_deg`, the same in every frame from there on)
     and `process` says so and how to state it. Against the labels turned as each frame was
     left, more of the car is found than with `--roll 0` (the turn left alone, as before it was
-    read), as precisely; `--roll 0` reads nothing and says nothing, and the clip level reads
-    no turn."""
+    read), as precisely. Stated (`--roll 0`), the turn stands and `process` says what turn the
+    edges read instead; the clip level reads no turn and is told nothing."""
     from app.evaluate import evaluate, load_labels
     from app.reframe import Framing, turned_labels, write_reframed
     from camera_cal import default_calibration_path, load_calibration
@@ -343,6 +344,10 @@ def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
     for name in ("left", "level"):
         frames, said = runs[name]
         assert not any("roll_deg" in r for r in frames) and "picture is turned" not in said
+    said = runs["left"][1]
+    read_instead = re.search(r"stated --roll 0, .* a turn of ([-\d.]+) degrees", said)
+    assert read_instead and 2.0 <= float(read_instead.group(1)) <= 4.0, said
+    assert "--roll" not in runs["level"][1]
 
 
 @pytest.fixture(scope="module")
