@@ -440,6 +440,8 @@ class Pipeline:
             return
         turn = self._level.update(undistorted, detections.boxes[detections.ids > 0])
         if turn is None:
+            if self._level.full:  # level, or leaning every which way: read no more
+                self._level = None
             return
         self._level = None
         if self.mounting.roll_deg is None:
