@@ -401,8 +401,10 @@ class Pipeline:
         cut = self._shots.update(undistorted) and self._fps > 0
         if cut:  # another shot: its scene measured afresh, the stages' history forgotten
             self._scene = self._scene_after_cut(undistorted, self._scene)
-            if self._level is not None:
-                self._level.reset()
+            # Another camera may be turned: read afresh, unless a turn was found already (it
+            # stands for the whole footage, as a stated one does).
+            if self.levelled is None and self._relevel is None and self.roll_contradicted is None:
+                self._level = RollReading()
             self._start_over(index)
         scene = self._scene.update(undistorted, frame)
         self._horizon_found = self._horizon_found or scene.estimated
