@@ -319,6 +319,33 @@ def write_table_parts(
             pq.write_table(pa.Table.from_pylist(data, schema=_schema(*columns)), tmp)
 
 
+def current_table_parts(table: Path, key: str, video: str, record: Path) -> bool:
+    """Rewrite an input's table parts that an older roadview wrote with other columns (a
+    resumed run skips the input; its parts must share the others' columns, or a query over the
+    folder fails or drops a column): frames and vehicles from its record, events from their
+    own part. Whether any was rewritten."""
+    import pyarrow.parquet as pq
+
+    columns = {"frames": FRAME_COLUMNS, "vehicles": VEHICLE_COLUMNS, "events": EVENT_COLUMNS}
+    parts = {name: table / name / f"{key}.parquet" for name in columns}
+    stale = [
+        name
+        for name, path in parts.items()
+        if path.exists() and pq.read_schema(path).names != [c for c, _ in columns[name]]
+    ]
+    if not stale:
+        return False
+    rows = [json.loads(line) for line in record.read_text().splitlines() if line.strip()]
+    events = []
+    if parts["events"].exists():
+        events = [
+            {k: v for k, v in e.items() if k != "video"}
+            for e in pq.read_table(parts["events"]).to_pylist()
+        ]
+    write_table_parts(table, key, video, rows, events)
+    return True
+
+
 def read_manifest(table: Path) -> dict[str, ManifestRow]:
     """The manifest of an earlier run, by input path (empty when there is none)."""
     path = table / "manifest.parquet"
@@ -407,6 +434,7 @@ def run_batch(
             and (video.exists() or not options.video)
         ):
             manifest[str(entry.path)] = ManifestRow(**{**asdict(old), "status": "skipped"})
+            current_table_parts(table, _key(entry), str(entry.relative), record)
             skipped += 1
         else:
             todo.append((entry, size, digest))
