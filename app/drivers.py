@@ -114,6 +114,16 @@ def levelled_note(roll_deg: float, frame: int, fps: float) -> str:
     )
 
 
+def roll_contradicted_note(stated_deg: float, read_deg: float) -> str:
+    """What to tell where the vehicles' rear edges still lean once levelled by the stated turn:
+    the turn they read instead, and how to state it or have it read."""
+    return (
+        f"stated --roll {stated_deg:g}, but its vehicles' rear edges still lean once levelled "
+        f"so: they read a turn of {read_deg:g} degrees; pass --roll {read_deg:g}, or leave "
+        "--roll out to have it read and levelled"
+    )
+
+
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
 MONOCHROME_NOTE = (
     "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
@@ -321,13 +331,8 @@ def process_video(
         if pipeline.levelled is not None:
             log(f"note: {source.name}: {levelled_note(*pipeline.levelled, info.fps)}")
         if pipeline.roll_contradicted is not None:
-            stated = mounting.roll_deg or 0.0
-            log(
-                f"note: {source.name}: stated --roll {stated:g}, but its vehicles' rear edges "
-                f"still lean once levelled so: they read a turn of {pipeline.roll_contradicted:g} "
-                f"degrees; pass --roll {pipeline.roll_contradicted:g}, or leave --roll out to "
-                "have it read and levelled"
-            )
+            said = roll_contradicted_note(mounting.roll_deg or 0.0, pipeline.roll_contradicted)
+            log(f"note: {source.name}: {said}")
         if count and (horizon := pipeline.horizon_note()) is not None:
             log(f"note: {source.name}: {horizon}")
         height = pipeline.height_note(float(np.median(scales))) if scales else None
