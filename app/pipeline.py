@@ -171,7 +171,6 @@ class Pipeline:
         self._horizon_found = False  # the footage showed its horizon in some frame
         self._roll = 0.0  # the turn the frames are levelled by
         self._level: RollReading | None = None  # the edges' lean, read until it is known
-        self._relevel: float | None = None  # a turn read, to level by from the next frame
         # The turn read off the footage and the frame from which it was levelled, if any.
         self.levelled: tuple[float, int] | None = None
         # The turn the edges imply where the user stated another (None: they agree, or too
@@ -204,7 +203,7 @@ class Pipeline:
         self._undistorter = undistorter_for(self.calibration, size, self._roll)
         # A still has too few vehicles to read a turn from.
         self._level = RollReading() if fps > 0 else None
-        self._relevel, self.levelled, self.roll_contradicted = None, None, None
+        self.levelled, self.roll_contradicted = None, None
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
@@ -371,28 +370,9 @@ class Pipeline:
         while pending:
             yield self._finish(pending.popleft())
 
-    def _start_over(self, index: int) -> None:
-        """The stages forget their history from the frame started as `index` on."""
-        self._shot_start = index
-        if self.lanes is not None:
-            self.lanes.reset(self._fps)
-        if self._worker is not None:
-            self._worker.reset_before_next(self._fps)
-        elif self.vehicles is not None:
-            self.vehicles.reset(self._fps)
-
-    def _level_anew(self) -> None:
-        """Level the frames by a turn read off the footage, from this frame on."""
-        if self._relevel is None or self.size is None:
-            return
-        self._roll, self._relevel = self._relevel, None
-        self._undistorter = undistorter_for(self.calibration, self.size, self._roll)
-        self.levelled = (self._roll, self._frame + (1 if self._worker is not None else 0))
-
     def _start(self, frame: Frame) -> _Started:
         """Undistort, hand the frame to the worker, and run the scene and the lanes here."""
         t0 = time.perf_counter()
-        self._level_anew()
         undistorted = self.undistort(frame)
         timings = {"undistort": (time.perf_counter() - t0) * 1000}
         assert self._scene is not None and self.size is not None
@@ -403,9 +383,15 @@ class Pipeline:
             self._scene = self._scene_after_cut(undistorted, self._scene)
             # Another camera may be turned: read afresh, unless a turn was found already (it
             # stands for the whole footage, as a stated one does).
-            if self.levelled is None and self._relevel is None and self.roll_contradicted is None:
+            if self.levelled is None and self.roll_contradicted is None:
                 self._level = RollReading()
-            self._start_over(index)
+            self._shot_start = index
+            if self.lanes is not None:
+                self.lanes.reset(self._fps)
+            if self._worker is not None:
+                self._worker.reset_before_next(self._fps)
+            elif self.vehicles is not None:
+                self.vehicles.reset(self._fps)
         scene = self._scene.update(undistorted, frame)
         self._horizon_found = self._horizon_found or scene.estimated
         self._last = (undistorted, scene)
@@ -434,10 +420,10 @@ class Pipeline:
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
         return _Started(undistorted, scene, placement, lane, timings, False, index, cut, self._roll)
 
-    def _read_roll(self, undistorted: Frame, detections: Detections) -> None:
-        """Take in the leans of a frame's tracked vehicles; once they read a turn, level the
-        frames by it from the next one started, or, where the user stated the turn, keep the
-        one they imply for a note (once: the reading then stops)."""
+    def _read_roll(self, undistorted: Frame, detections: Detections, index: int) -> None:
+        """Take in the leans of the tracked vehicles of the frame started as `index`; once they
+        read a turn, level the frames by it from the next one started, or, where the user
+        stated the turn, keep the one they imply for a note (once: the reading then stops)."""
         if self._level is None or not len(detections):
             return
         turn = self._level.update(undistorted, detections.boxes[detections.ids > 0])
@@ -446,10 +432,14 @@ class Pipeline:
                 self._level = None
             return
         self._level = None
-        if self.mounting.roll_deg is None:
-            self._relevel = self._roll + turn
-        else:
+        if self.mounting.roll_deg is not None:
             self.roll_contradicted = round(self._roll + turn, 1)
+            return
+        # From the next frame started (with the worker, frames after this one are started).
+        assert self.size is not None
+        self._roll += turn
+        self._undistorter = undistorter_for(self.calibration, self.size, self._roll)
+        self.levelled = (self._roll, self._frame + self._started - index)
 
     def _numbered(self, found: VehicleResult) -> VehicleResult:
         """`found` with its track ids after those of the earlier shots (each shot's tracker
@@ -498,7 +488,7 @@ class Pipeline:
         if vehicles is not None:
             vehicles = self._numbered(vehicles)
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
-            self._read_roll(undistorted, vehicles.detections)
+            self._read_roll(undistorted, vehicles.detections, started.index)
         facts = None
         # Metres follow the warp placed from the scene: the lane stage's, or without it the
         # default lane config's for the same placement.
