@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import json
 import os
 import socket
 import time
@@ -186,6 +185,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float, li
     from app.annotators import default_annotators
     from app.assembly import build_stages
     from app.drivers import process_video
+    from app.record import read_record
     from app.runtime import tune_process
     from camera_cal import load_calibration
 
@@ -210,7 +210,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float, li
         log=notes.append,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
-    rows = [json.loads(line) for line in record.read_text().splitlines()]
+    rows = list(read_record(record))
     events = [event_record(e) for e in summary.events]
     write_table_parts(options.out / TABLE, _key(entry), str(entry.relative), rows, events)
     return summary.frames, summary.video_seconds, notes
@@ -326,6 +326,8 @@ def current_table_parts(table: Path, key: str, video: str, record: Path) -> bool
     own part. Whether any was rewritten."""
     import pyarrow.parquet as pq
 
+    from app.record import read_record
+
     columns = {"frames": FRAME_COLUMNS, "vehicles": VEHICLE_COLUMNS, "events": EVENT_COLUMNS}
     parts = {name: table / name / f"{key}.parquet" for name in columns}
     stale = [
@@ -335,7 +337,7 @@ def current_table_parts(table: Path, key: str, video: str, record: Path) -> bool
     ]
     if not stale:
         return False
-    rows = [json.loads(line) for line in record.read_text().splitlines() if line.strip()]
+    rows = list(read_record(record))
     events = []
     if parts["events"].exists():
         events = [
