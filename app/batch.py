@@ -241,6 +241,7 @@ FRAME_COLUMNS = (
     ("ground_scale", "double"),
     ("rear", "bool"),  # a rear camera's frame (the record's facing)
     ("roll_deg", "double"),  # the turn the frame was levelled by (stated or read; 0: none)
+    ("focal_mm", "double"),  # the lens's focal length where it gave the distances (null: none)
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -299,6 +300,7 @@ def write_table_parts(
             "ground_scale": r.get("ground_scale"),
             "rear": seen_from_behind(r),
             "roll_deg": r.get("roll_deg", 0.0),
+            "focal_mm": r.get("focal_mm"),
         }
         for r in rows
     ]

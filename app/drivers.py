@@ -213,6 +213,12 @@ def lens_for(
     return calibration, mounting
 
 
+def recorded_focal_mm(calibration: Calibration | None, mounting: Mounting) -> float | None:
+    """The focal length the record states: the lens's where it, not a calibration, gives the
+    distances (its frames are then not undistorted, which `report` must know)."""
+    return mounting.focal_mm if calibration is None else None
+
+
 def camera_for(
     calibration: Calibration | None,
     mounting: Mounting,
@@ -266,6 +272,7 @@ def process_video(
         )
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
+        focal_mm = recorded_focal_mm(calibration, mounting)
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()
@@ -309,7 +316,9 @@ def process_video(
             if video is not None:
                 video.write(compose(out.undistorted, out.result, annotators))
             if records is not None:
-                records.write(frame_record(index, index / info.fps, info.size, out.result))
+                records.write(
+                    frame_record(index, index / info.fps, info.size, out.result, focal_mm)
+                )
             count += 1
             progress.update()
         progress.close()
@@ -386,5 +395,7 @@ def process_still(
             compose(out.undistorted, out.result, annotators)
         )
         if record is not None:
-            sinks.enter_context(RecordSink(record)).write(frame_record(0, 0.0, size, out.result))
+            sinks.enter_context(RecordSink(record)).write(
+                frame_record(0, 0.0, size, out.result, recorded_focal_mm(calibration, mounting))
+            )
     return RunSummary(1, time.perf_counter() - started, output, record)

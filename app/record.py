@@ -58,15 +58,22 @@ def vehicle_facts_record(facts: VehicleFacts) -> dict[str, Any]:
 
 
 def frame_record(
-    index: int, time_s: float, size: tuple[int, int], result: FrameResult
+    index: int,
+    time_s: float,
+    size: tuple[int, int],
+    result: FrameResult,
+    focal_mm: float | None = None,
 ) -> dict[str, Any]:
-    """The record object of one frame."""
+    """The record object of one frame; `focal_mm` is the lens's focal length in 35 mm terms
+    where it, not a calibration, gave the distances (the frames are then as decoded)."""
     record: dict[str, Any] = {
         "frame": index,
         "time_s": round(time_s, 4),
         "size": list(size),
         "shot": result.shot,
     }
+    if focal_mm is not None:
+        record["focal_mm"] = focal_mm
     if result.roll_deg:
         record["roll_deg"] = round(result.roll_deg, 1)
     if result.scene is not None:

@@ -342,9 +342,10 @@ def event_thumbnails(
     calibration: Calibration | None,
     roll_deg: float | None = None,
 ) -> dict[int, str]:
-    """A thumbnail per event: the video's frame in the middle of the event, undistorted (and
-    levelled by `roll_deg`, or by the record's turn at that frame) as `process` did, with the
-    involved vehicle's box from the record."""
+    """A thumbnail per event: the video's frame in the middle of the event, undistorted (not
+    where the record's lens is known by its focal length) and levelled by `roll_deg`, or by the
+    record's turn at that frame, as `process` did, with the involved vehicle's box from the
+    record."""
     info = probe_video(video)
     size = tuple(rows[0].get("size", info.size))
     if tuple(info.size) != size:
@@ -352,10 +353,12 @@ def event_thumbnails(
             f"--video {video} is {info.size[0]}x{info.size[1]} but the record's frames are "
             f"{size[0]}x{size[1]}; pass the video the record was made from"
         )
-    # A video that tags its lens (a phone's) is another camera's: `process` left the shipped
-    # calibration out (`app.drivers.calibration_for`).
+    # A lens known by its focal length (stated to `process`, as the record says, or tagged in
+    # the video, a phone's) is another camera's: `process` left the calibration out
+    # (`app.drivers.calibration_for`).
     fitting = calibration is not None and fits(calibration, info.size)
-    lens = calibration if fitting and info.focal_mm is None else None
+    known = info.focal_mm is not None or any("focal_mm" in r for r in rows)
+    lens = calibration if fitting and not known else None
     by_frame = {int(r["frame"]): r for r in rows}
     undistorters: dict[float, Undistorter | None] = {}  # one per turn levelled by
     thumbnails = {}

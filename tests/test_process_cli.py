@@ -455,7 +455,8 @@ def test_a_lens_stated_or_tagged_gives_its_distances_and_speed(
     lens, its distances and speed read about 0.8 of the clip's. Its focal length in 35 mm
     terms, tagged as a phone tags its videos or stated (`--focal-length`), gives them within
     6 %; tagged or stated alike (the shipped calibration left out, as for another camera, and
-    said so). A lens no camera has, or one beside a calibration file, is refused in one line."""
+    said so; the record's `focal_mm` says it). A lens no camera has, or one beside a
+    calibration file, is refused in one line."""
     from app.reframe import distance_ratios, speed_ratios, tagged_lens_framing
     from app.sources import probe_video
     from camera_cal import default_calibration_path, load_calibration
@@ -485,6 +486,9 @@ def test_a_lens_stated_or_tagged_gives_its_distances_and_speed(
     assert "--focal-length" in said and "without its calibration" in said, said
     assert [r["vehicles"] for r in stated] == [r["vehicles"] for r in tagged]
     assert [r["speed_kmh"] for r in stated] == [r["speed_kmh"] for r in tagged]
+    # The record says which lens gave the distances (a report's thumbnails follow it).
+    assert {r.get("focal_mm") for r in stated + tagged} == {framing.focal_mm}
+    assert not any("focal_mm" in r for r in plain + reference)
     out = tmp_path / "x.mp4"
     bad = run_cli("process", narrow_copies["narrow"], "-o", out, "--focal-length", "3")
     assert_one_line_error(bad, "--focal-length 3", "35 mm")

@@ -200,3 +200,35 @@ def test_thumbnails_are_levelled_as_the_record_was(tmp_path: Path) -> None:
     assert abs(bar_lean(event_thumbnails(video, read, [event], None)[0])) < 0.5
     assert abs(bar_lean(event_thumbnails(video, rows, [event], None)[0]) - 5.0) < 0.5
     assert abs(bar_lean(event_thumbnails(video, read, [event], None, 0.0)[0]) - 5.0) < 0.5
+
+
+def test_thumbnails_of_a_lens_known_by_its_focal_length_are_not_undistorted(
+    tmp_path: Path,
+) -> None:
+    """Where the record says its distances followed a focal length (`focal_mm`: `process` was
+    given `--focal-length`, and so left the shipped calibration out), an event's thumbnail is
+    the frame as decoded, as `process` showed it; without it the frame is undistorted."""
+    from app.report import event_thumbnails
+    from app.sinks import VideoSink
+    from camera_cal import default_calibration_path, load_calibration
+
+    picture = np.full((360, 640, 3), 60, np.uint8)
+    picture[20:30, 40:600] = 255  # near the top edge, where the shipped lens bends most
+    video = tmp_path / "phone.mp4"
+    with VideoSink(video, (640, 360), 25.0, preset="medium") as sink:
+        for _ in range(30):
+            sink.write(picture)
+    event = Event("lane_departure", 10, 20, 0.4, 0.8)
+    rows = _rows(30)
+    stated = [{**row, "focal_mm": 30.0} for row in rows]
+    shipped = load_calibration(default_calibration_path())
+
+    def picture_of(uri: str) -> np.ndarray:
+        data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
+        return np.asarray(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE), np.float64)
+
+    decoded = picture_of(event_thumbnails(video, rows, [event], None)[0])
+    known = picture_of(event_thumbnails(video, stated, [event], shipped)[0])
+    undistorted = picture_of(event_thumbnails(video, rows, [event], shipped)[0])
+    assert np.abs(known - decoded).max() == 0
+    assert np.abs(undistorted - decoded).mean() > 2
