@@ -29,7 +29,7 @@ from app.events import (
     seen_from_behind,
 )
 from app.record import read_record_lines
-from app.sources import probe_video, read_frames
+from app.sources import probe_video, read_frames, within_size
 from camera_cal import Calibration, Undistorter, fits, undistorter_for
 
 PLOT_W, PLOT_H = 860, 170
@@ -348,6 +348,8 @@ def event_thumbnails(
     record."""
     info = probe_video(video)
     size = tuple(rows[0].get("size", info.size))
+    if tuple(info.size) != size and tuple(within_size(info, min(size)).size) == size:
+        info = within_size(info, min(size))  # processed reduced (`process --max-size`)
     if tuple(info.size) != size:
         raise InputError(
             f"--video {video} is {info.size[0]}x{info.size[1]} but the record's frames are "

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
+from app.errors import InputError
 from app.events import Event, event_record
 from app.report import record_series, report_html, svg_plot
 from tests.helpers import assert_one_line_error, process_clip, run_cli
@@ -159,12 +160,12 @@ def test_report_problems_are_one_line(tmp_path: Path, test_video: Path) -> None:
     bad.write_text('{"kind": "sneezing"}\n')
     assert_one_line_error(run_cli("report", record, "--events", bad, "-o", page), "not an event")
     small = tmp_path / "small.jsonl"
-    small.write_text('{"frame": 0, "time_s": 0.0, "size": [640, 360]}\n')
+    small.write_text('{"frame": 0, "time_s": 0.0, "size": [480, 360]}\n')  # not the video's
     events = tmp_path / "ok.jsonl"
     events.write_text(json.dumps(event_record(Event("closing_fast", 0, 0, 0.0, 0.0, 1, 2.0))))
     assert_one_line_error(
         run_cli("report", small, "--events", events, "--video", test_video, "-o", page),
-        "the record's frames are 640x360",
+        "the record's frames are 480x360",
     )
     assert not page.exists()
     done = run_cli("report", record)
@@ -232,3 +233,32 @@ def test_thumbnails_of_a_lens_known_by_its_focal_length_are_not_undistorted(
     undistorted = picture_of(event_thumbnails(video, rows, [event], shipped)[0])
     assert np.abs(known - decoded).max() == 0
     assert np.abs(undistorted - decoded).mean() > 2
+
+
+def test_thumbnails_of_a_video_processed_reduced(tmp_path: Path) -> None:
+    """A video processed at a reduced size (4K at 1080p, `process --max-size`) has a record of
+    the reduced frames: its thumbnails are of frames decoded at that size, with the record's
+    box where it was; a record of another aspect ratio is still refused."""
+    from app.report import event_thumbnails
+    from app.sinks import VideoSink
+
+    picture = np.full((360, 640, 3), 60, np.uint8)
+    picture[200:260, 300:400] = 255  # the car, at (150, 100)-(200, 130) in the halved frames
+    video = tmp_path / "large.mp4"
+    with VideoSink(video, (640, 360), 25.0, preset="medium") as sink:
+        for _ in range(30):
+            sink.write(picture)
+    event = Event("closing_fast", 10, 20, 0.4, 0.8, 1, 2.0)
+    car = {"id": 1, "box": [150, 100, 200, 130], "score": 0.9}
+    rows = [{**row, "size": [320, 180], "vehicles": [car]} for row in _rows(30)]
+    (uri,) = event_thumbnails(video, rows, [event], None).values()
+    data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
+    thumb = np.asarray(cv2.imdecode(data, cv2.IMREAD_COLOR))  # BGR: the box drawn red
+    red = (thumb[..., 2] > 180) & (thumb[..., 1] < 120)
+    ys, xs = np.nonzero(red)
+    scale = thumb.shape[1] / 320
+    assert abs(xs.min() / scale - 150) < 4 and abs(xs.max() / scale - 200) < 4
+    assert abs(ys.min() / scale - 100) < 4 and abs(ys.max() / scale - 130) < 4
+    other = [{**row, "size": [240, 180]} for row in rows]
+    with pytest.raises(InputError, match="240x180"):
+        event_thumbnails(video, other, [event], None)
