@@ -426,7 +426,10 @@ class Pipeline:
         stated the turn, keep the one they imply for a note (once: the reading then stops)."""
         if self._level is None or not len(detections):
             return
-        turn = self._level.update(undistorted, detections.boxes[detections.ids > 0])
+        tracked = detections.ids > 0
+        turn = self._level.update(
+            undistorted, detections.boxes[tracked], detections.ids[tracked]
+        )
         if turn is None:
             if self._level.full:  # level, or leaning every which way: read no more
                 self._level = None

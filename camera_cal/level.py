@@ -28,9 +28,13 @@ class LevelConfig:
     the mean of those within `band_deg` of it; boxes under `min_box_px` across are too coarse,
     and those over `max_box_px` are read shrunk to it (a near car's rear costs no more). The
     picture is taken as turned once `least` leans are in, their median at least
-    `min_roll_deg` off level and at most `max_roll_deg`, and their quartiles within
-    `max_spread_deg` of each other. Measured (README): the shared clips level read -0.1 to
-    0.3, turned 3 degrees 2.9-3.3; LA's leans scatter too far to be taken."""
+    `min_roll_deg` off level and at most `max_roll_deg`, their quartiles within
+    `max_spread_deg` of each other, and the vehicles that gave `vehicle_leans` or more agree
+    with it: at least `vehicles` of them, and more than half, with their own median within
+    `max_spread_deg` of it. One vehicle's edges can lean on their own (a car seen from its
+    side, or turned on a bend: one on the level LA clip leant 2.7 degrees for 21 frames); a
+    turned picture turns every vehicle's. Measured (README): the shared clips level read -0.1
+    to 0.3, turned 3 degrees 2.9-3.3; LA's leans scatter too far to be taken."""
 
     search_deg: float = 12.0
     bin_deg: float = 0.5
@@ -45,6 +49,8 @@ class LevelConfig:
     min_roll_deg: float = 1.5
     max_roll_deg: float = 8.0
     max_spread_deg: float = 1.5
+    vehicles: int = 2
+    vehicle_leans: int = 5
 
 
 def edge_lean(
@@ -102,27 +108,31 @@ def edge_lean(
 
 
 class RollReading:
-    """History of the leans of vehicles' boxes (the last `keep`): the picture's turn once they
-    agree on one."""
+    """History of the leans of vehicles' boxes (the last `keep`, with the vehicle's track id):
+    the picture's turn once they, and the vehicles, agree on one."""
 
     def __init__(self, config: LevelConfig | None = None, keep: int = 200) -> None:
         self.config = config if config is not None else LevelConfig()
-        self._leans: deque[float] = deque(maxlen=keep)
+        self._leans: deque[tuple[int, float]] = deque(maxlen=keep)
 
     def reset(self) -> None:
         """Forget the leans (another shot, perhaps another camera)."""
         self._leans.clear()
 
-    def update(self, rgb: NDArray[np.uint8], boxes: NDArray[np.float64]) -> float | None:
+    def update(
+        self, rgb: NDArray[np.uint8], boxes: NDArray[np.float64], ids: NDArray[np.int_]
+    ) -> float | None:
         """Take in one frame's vehicle boxes ((n, 4) x0, y0, x1, y1, wholly inside the
-        picture); the turn read so far (see `roll_deg`)."""
+        picture) and their track ids; the turn read so far (see `roll_deg`)."""
         h, w = rgb.shape[:2]
-        for x0, y0, x1, y1 in np.asarray(boxes, np.float64).reshape(-1, 4):
+        for (x0, y0, x1, y1), vehicle in zip(
+            np.asarray(boxes, np.float64).reshape(-1, 4), np.asarray(ids), strict=True
+        ):
             if x0 <= 0 or y0 <= 0 or x1 >= w or y1 >= h:
                 continue  # cut by the picture's side: its edges may be the picture's
             lean = edge_lean(rgb, (x0, y0, x1, y1), self.config)
             if lean is not None:
-                self._leans.append(lean)
+                self._leans.append((int(vehicle), lean))
         return self.roll_deg
 
     @property
@@ -143,9 +153,18 @@ class RollReading:
         c = self.config
         if len(self._leans) < c.least:
             return None
-        q1, median, q3 = np.quantile(np.asarray(self._leans), [0.25, 0.5, 0.75])
+        ids, leans = (np.asarray(values) for values in zip(*self._leans, strict=True))
+        q1, median, q3 = np.quantile(leans, [0.25, 0.5, 0.75])
         # Leans that scatter (a coarse picture's small cars) are not taken, however many: LA's
         # level picture would read a turn of 1.6 degrees (README).
         if q3 - q1 > c.max_spread_deg or not c.min_roll_deg <= abs(median) <= c.max_roll_deg:
+            return None
+        own = [
+            float(np.median(leans[ids == vehicle]))
+            for vehicle in np.unique(ids)
+            if np.count_nonzero(ids == vehicle) >= c.vehicle_leans
+        ]
+        agree = sum(abs(lean - median) <= c.max_spread_deg for lean in own)
+        if agree < c.vehicles or 2 * agree <= len(own):
             return None
         return round(float(median), 1)

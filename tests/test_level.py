@@ -43,20 +43,43 @@ def test_a_box_too_small_or_without_edges_gives_no_lean() -> None:
 
 
 def test_the_reading_waits_for_enough_leans_that_agree_on_a_turn() -> None:
-    """Turned 3 degrees, the reading is None until `least` boxes are in, then the turn; a level
-    picture reads None (level), as does one whose boxes lean every which way; a box cut by the
-    picture's side is left out (its edge may be the picture's own)."""
+    """Turned 3 degrees, the reading is None until `least` boxes of two vehicles are in, then
+    the turn; a level picture reads None (level), as does one whose boxes lean every which way;
+    a box cut by the picture's side is left out (its edge may be the picture's own)."""
     box = np.array([[40.0, 50.0, 200.0, 190.0]])
+
+    def vehicle(k: int) -> np.ndarray:
+        return np.array([1 + k % 2])  # two vehicles in turn
+
     turned = RollReading()
-    readings = [turned.update(_rear(3.0, seed), box) for seed in range(20)]
+    readings = [turned.update(_rear(3.0, seed), box, vehicle(seed)) for seed in range(20)]
     assert readings[:-1] == [None] * 19
     assert readings[-1] is not None and abs(readings[-1] - 3.0) < 0.35, readings[-1]
     level = RollReading()
-    assert all(level.update(_rear(0.0, seed), box) is None for seed in range(30))
+    assert all(level.update(_rear(0.0, seed), box, vehicle(seed)) is None for seed in range(30))
     assert level.readings == 30
     mixed = RollReading()
-    assert all(mixed.update(_rear(4.0 * (-1) ** k, k), box) is None for k in range(30))
+    assert all(mixed.update(_rear(4.0 * (-1) ** k, k), box, vehicle(k)) is None for k in range(30))
     cut = RollReading()
     for seed in range(25):
-        cut.update(_rear(3.0, seed), np.array([[0.0, 50.0, 200.0, 190.0]]))
+        cut.update(_rear(3.0, seed), np.array([[0.0, 50.0, 200.0, 190.0]]), vehicle(seed))
     assert cut.readings == 0 and cut.roll_deg is None
+
+
+def test_one_vehicles_lean_is_not_the_pictures() -> None:
+    """The leans of one vehicle alone, however many and however much they agree, are not read
+    as the picture's turn (a car seen from its side, or turned on a bend, leans on its own);
+    a second vehicle leaning with it is, one leaning otherwise is not."""
+    box = np.array([[40.0, 50.0, 200.0, 190.0]])
+    alone = RollReading()
+    assert all(alone.update(_rear(3.0, k), box, np.array([1])) is None for k in range(40))
+    joined = RollReading()
+    for k in range(40):
+        joined.update(_rear(3.0, k), box, np.array([1]))
+    readings = [joined.update(_rear(2.5, k), box, np.array([2])) for k in range(5)]
+    assert readings[:4] == [None] * 4 and readings[4] is not None
+    assert abs(readings[4] - 3.0) < 0.35, readings[4]
+    contradicted = RollReading()
+    for k in range(40):
+        contradicted.update(_rear(3.0, k), box, np.array([1]))
+    assert all(contradicted.update(_rear(0.0, k), box, np.array([2])) is None for k in range(8))

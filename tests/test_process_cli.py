@@ -301,20 +301,22 @@ def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: 
 def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
     data_dir: Path, tmp_path: Path
 ) -> None:
-    """project_cut_2 turned 3 degrees about its centre and run without a calibration, untold:
-    the white car's rear edges read the turn within a degree by 2 s, the frames from the next
-    one on are levelled by it (the record's `roll_deg`, the same in every frame from there on)
-    and `process` says so and how to state it. Against the labels turned as each frame was
-    left, more of the car is found than with `--roll 0` (the turn left alone, as before it was
-    read), as precisely. Stated (`--roll 0`), the turn stands and `process` says what turn the
-    edges read instead; the clip level reads no turn and is told nothing."""
+    """test_video turned 3 degrees about its centre and run without a calibration, untold: the
+    rear edges of its two cars agree on the turn within a degree by 1 s, the frames from the
+    next one on are levelled by it (the record's `roll_deg`, the same in every frame from there
+    on) and `process` says so and how to state it. Levelled, the cars' distances are the level
+    copy's within 5 % (left turned, as with `--roll 0`, they read a fifth farther), and against
+    the labels turned as each frame was left, as many boxes are found, as precisely. Stated
+    (`--roll 0`), the turn stands and `process` says what turn the edges read instead; the
+    clip level reads no turn and is told nothing."""
     from app.evaluate import evaluate, load_labels
     from app.reframe import Framing, turned_labels, write_reframed
     from camera_cal import default_calibration_path, load_calibration
+    from vehicles.detections import iou_matrix
 
-    video = data_dir / "videos" / "project_cut_2.mp4"
+    video = data_dir / "videos" / "test_video.mp4"
     calibration = load_calibration(default_calibration_path())
-    level = load_labels(data_dir / "labels" / "project_cut_2.json")
+    level = load_labels(data_dir / "labels" / "test_video.json")
     runs: dict[str, tuple[list[dict[str, Any]], str]] = {}
     for name, turn, extra in (("read", 3.0, ()), ("left", 3.0, ("--roll", "0")), ("level", 0, ())):
         clip = tmp_path / f"{name}.mp4"
@@ -328,10 +330,30 @@ def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
         runs[name] = (read_record(record), result.stdout + result.stderr)
     rows, said = runs["read"]
     levelled = [r["frame"] for r in rows if "roll_deg" in r]
-    assert levelled and levelled[0] <= 50 and levelled == list(range(levelled[0], len(rows)))
+    assert levelled and levelled[0] <= 25 and levelled == list(range(levelled[0], len(rows)))
     (roll,) = {r["roll_deg"] for r in rows if "roll_deg" in r}
     assert 2.0 <= roll <= 4.0, roll
     assert f"turned {roll:.1f} degrees anticlockwise" in said and f"--roll {roll:g}" in said, said
+
+    def distance_ratio(name: str) -> float:
+        """The median over the levelled frames' vehicles of their distance in run `name` over
+        the same vehicle's in the level copy (boxes matched at IoU 0.5)."""
+        ratios = []
+        for framed, plain in zip(runs[name][0], runs["level"][0], strict=True):
+            if framed["frame"] < levelled[0] or not framed["vehicles"] or not plain["vehicles"]:
+                continue
+            overlap = iou_matrix(
+                np.array([v["box"] for v in framed["vehicles"]]),
+                np.array([v["box"] for v in plain["vehicles"]]),
+            )
+            for i, j in enumerate(overlap.argmax(axis=1)):
+                if overlap[i, j] >= 0.5:
+                    d = framed["vehicles"][i]["distance_m"], plain["vehicles"][j]["distance_m"]
+                    ratios.append(d[0] / d[1])
+        assert len(ratios) >= 20, name
+        return float(np.median(ratios))
+
+    assert abs(distance_ratio("read") - 1) < 0.05 and distance_ratio("left") > 1.1
     scores = {}
     for name in ("read", "left"):
         frames = runs[name][0]
@@ -339,7 +361,7 @@ def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
         truth = turned_labels(level, left, (1280, 720))
         scores[name] = evaluate(truth, frames)["vehicles"]["iou_0.5"]
     read, untold = scores["read"], scores["left"]
-    assert read["true_positives"] >= untold["true_positives"] + 6, scores
+    assert read["true_positives"] >= untold["true_positives"], scores
     assert read["precision"] >= untold["precision"] and read["mean_iou"] >= 0.75, scores
     for name in ("left", "level"):
         frames, said = runs[name]
