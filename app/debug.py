@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
-from app.drivers import camera_for
+from app.drivers import camera_for, look_ahead
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -214,6 +214,7 @@ def run_debug(
     ensure_writable_dir(out_dir)
     start = max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)
+    look_ahead(pipeline, source, info, start, last)
     annotators = default_annotators(insets=True)
     written: list[Path] = []
     names: list[str] = []

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from contextlib import ExitStack
+from contextlib import ExitStack, closing
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -18,7 +18,7 @@ from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
 from app.mounting import Mounting, check_mounting, video_mounting
-from app.pipeline import Pipeline
+from app.pipeline import HORIZON_WAIT_S, Pipeline
 from app.progress import Progress
 from app.record import frame_record
 from app.runtime import warm_up_opencv
@@ -233,6 +233,15 @@ def camera_for(
     return lens_for(calibration, mounting, info.size, info.focal_mm, name, required, log)
 
 
+def look_ahead(pipeline: Pipeline, source: Path, info: VideoInfo, first: int, last: int) -> None:
+    """Let a prepared `pipeline` read an unknown camera's horizon off the frames `source` starts
+    with at `first` (as long as its stages would wait for it, up to `last`) before it processes
+    them (`Pipeline.look_ahead`): a second decoder, for a known camera never started."""
+    end = min(last, first + round(HORIZON_WAIT_S * info.fps))
+    with closing(read_frames(source, info, first, end)) as frames:
+        pipeline.look_ahead(frames)
+
+
 def process_video(
     source: Path,
     output: Path | None,
@@ -284,6 +293,7 @@ def process_video(
         ExitStack() as sinks,
     ):
         pipeline.prepare(info.size, info.fps, first)
+        look_ahead(pipeline, source, info, first, last)
         records = sinks.enter_context(RecordSink(record)) if record is not None else None
         video = None
         if output is not None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -281,6 +281,27 @@ class Pipeline:
         """Neither a calibration nor `--horizon`: the stages wait for the footage's own horizon
         (see `_wait`), and the scene measures it hard while they do."""
         return self.calibration is None and self.mounting.horizon_y is None
+
+    def look_ahead(self, frames: Iterable[Frame]) -> float | None:
+        """Read an unknown camera's horizon off the clip's first `frames` before they are
+        processed, so that its stages need not wait for it (see `_wait`): a scene tracker of
+        its own takes them in until it estimates a horizon, or the picture cuts to another
+        shot; the clip's scene then starts with its evidence (`SceneTracker.take_horizon`).
+        Call it after `prepare`, with the frames the clip will start with. The row read, or
+        None (a known camera's horizon, none found, or the frames ran out)."""
+        if not self._unknown_camera or self.size is None or self._started:
+            return None
+        scene, shots = self._new_scene(self.size, self._fps), ShotDetector()
+        for frame in frames:
+            undistorted = self.undistort(frame)
+            if shots.update(undistorted):
+                return None  # what follows is another shot's
+            geometry = scene.update(undistorted, frame)
+            if geometry.estimated and self._scene is not None:
+                self._scene.take_horizon(scene)
+                self._horizon_found = True
+                return geometry.horizon_y
+        return None
 
     def _new_scene(self, size: tuple[int, int], fps: float) -> SceneTracker:
         """A scene tracker with no history, for a clip or a shot of frames of `size` at `fps`."""

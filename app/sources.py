@@ -431,7 +431,7 @@ SDR_TONE_MAP = (
 
 def read_frames(
     path: Path, info: VideoInfo, start_frame: int = 0, end_frame: int | None = None
-) -> Iterator[Frame]:
+) -> Generator[Frame, None, None]:
     """Decoded upright RGB frames in order, from `start_frame` up to (not including) `end_frame`:
     frame k is the picture that plays k / fps after the first (a variable-rate video's frames
     repeated or skipped to a steady rate, see `VideoInfo.frame_times`)."""

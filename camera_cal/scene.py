@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import cv2
@@ -382,6 +382,8 @@ class SceneTracker:
         self.light_every = light_every
         self._greys: deque[float] = deque(maxlen=light_window)  # the road's recent grey levels
         self._grains: deque[float] = deque(maxlen=light_window)  # ... and grain
+        # The geometry and placement a look ahead gave, until the horizon's own estimate stands.
+        self._ahead: tuple[SceneGeometry, dict[str, Any]] | None = None
 
     def _picture(self) -> Box:
         """The box inside the bars."""
@@ -416,10 +418,27 @@ class SceneTracker:
             if top is not None:
                 self._bonnet = min(y0 + top, self._bonnet or y1)
 
+    def take_horizon(self, other: SceneTracker) -> None:
+        """Until this tracker's own horizon stands, give the stages (`update`'s geometry, the
+        `placement`) the one `other` estimated off the frames this one is about to take in
+        (see `app.pipeline.Pipeline.look_ahead`). The same frames then give this one the same
+        estimate, and its history is as without: measured under the default horizon, as
+        `other`'s was (a horizon given instead moves where the edges are looked for, and the
+        LA clip's first estimate then fell 110 rows low)."""
+        self._ahead = (other.current, other.placement)
+
     @property
     def current(self) -> SceneGeometry:
         """The geometry as of the last frame."""
-        return self._current
+        if self._ahead is None:
+            return self._current
+        ahead, _ = self._ahead
+        return replace(
+            self._current,
+            horizon_y=ahead.horizon_y,
+            vanishing_x=ahead.vanishing_x,
+            estimated=ahead.estimated,
+        )
 
     def update(
         self, rgb: NDArray[np.uint8], decoded: NDArray[np.uint8] | None = None
@@ -500,7 +519,9 @@ class SceneTracker:
             live[2] - live[0]
         ):
             self._placed_x = vanishing_x
-        return self._current
+        if estimated:
+            self._ahead = None
+        return self.current
 
     def observe_lane_width(self, sample: float | None, believed: bool = False) -> None:
         """Take in the lane stage's width sample of the last frame (None: none measured) and
@@ -520,9 +541,12 @@ class SceneTracker:
         wobble neither restarts the lanes' history nor moves the vehicle bands; the column is
         None (the live centre) until it is that far off the centre."""
         horizon, live, (x0, y0, x1, y1) = self._placed
+        placed_x = self._placed_x
+        if self._ahead is not None:
+            horizon, placed_x = self._ahead[1]["horizon_y"], self._ahead[1]["vanishing_x"]
         return {
             "horizon_y": horizon,
-            "vanishing_x": self._placed_x,
+            "vanishing_x": placed_x,
             "live": live,
             "overlays": self._current.overlays,
             # The scale is the picture's inside the bars: a bonnet hides road, not lens.

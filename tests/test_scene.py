@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
@@ -296,19 +296,72 @@ def test_a_crop_keeps_the_scale_of_the_picture_it_was_cut_from(
     assert scale_height(live) == expected
 
 
-def test_an_unknown_camera_waits_for_its_horizon(wild_dir: Path, tmp_path: Path) -> None:
+def test_an_unknown_camera_reads_its_horizon_ahead(wild_dir: Path, tmp_path: Path) -> None:
     """Started mid-clip on the night highway without a calibration, the default horizon sits far
-    below the road's: the stages wait for the footage's own estimate rather than draw a lane and
-    box dark road by the default; once it stands, the lane is found."""
+    below the road's. Processed frame by frame, the stages wait for the footage's own estimate
+    rather than draw a lane and box dark road by the default; `process` reads the horizon off
+    the first frames before it processes them (`Pipeline.look_ahead`), so that every frame is
+    placed by the footage's horizon and the lane is found from the first frame on."""
+    from app.pipeline import Pipeline
+    from app.record import frame_record
+    from lanes.finder import LaneFinder
+
     clip = wild_dir / "night_highway_istock.mp4"
     rows = process_clip(clip, tmp_path, "--calibration", "none", "--start", "11.7", "--end", "16")
-    default = rows[0]["horizon_y"]
-    waited = [r for r in rows if r["horizon_y"] == default]
-    placed = [r for r in rows if r["horizon_y"] != default]
-    assert 5 <= len(waited) < 75  # the 5 estimates it needs at least, the 3 s wait at most
-    assert not any(r["lane"] or r["vehicles"] for r in waited)
-    assert all(abs(r["horizon_y"] - default) > 0.2 * default for r in placed)
-    assert sum(1 for r in placed if r["lane"]) >= 0.9 * len(placed)
+    info = probe_video(clip)
+    first = round(11.7 * info.fps)
+    frames = list(read_frames(clip, info, first, first + 40))
+    with Pipeline(None, LaneFinder(), None) as pipeline:
+        pipeline.prepare(info.size, info.fps, first)
+        waiting = [frame_record(0, 0.0, info.size, pipeline.run(f).result) for f in frames]
+    default = waiting[0]["horizon_y"]
+    waited = [r for r in waiting if r["horizon_y"] == default]
+    assert 5 <= len(waited) < 40  # the 5 estimates it needs at least
+    assert not any(r["lane"] for r in waited)
+    # Read ahead: no frame is placed by the default, and the first frames have their lane.
+    assert all(abs(r["horizon_y"] - default) > 0.2 * default for r in rows)
+    assert sum(1 for r in rows[:5] if r["lane"]) >= 4
+    assert sum(1 for r in rows if r["lane"]) >= 0.9 * len(rows)
+    # The horizon read ahead is the one the frames then read themselves.
+    assert abs(rows[0]["horizon_y"] - waiting[-1]["horizon_y"]) < 0.02 * info.size[1]
+
+
+def test_the_horizon_is_read_ahead_only_for_an_unknown_cameras_first_shot(
+    data_dir: Path, wild_dir: Path
+) -> None:
+    """`look_ahead` reads the horizon of the shot the clip starts with: a cut before it is found
+    leaves the stages to wait as before; a known camera's frames are not even decoded."""
+    from app.pipeline import Pipeline
+    from camera_cal import default_calibration_path, load_calibration
+    from lanes.finder import LaneFinder
+
+    def frames(video: Path, count: int) -> list[np.ndarray]:
+        return [
+            cv2.resize(f, (1280, 720)) for f in read_frames(video, probe_video(video), 0, count)
+        ]
+
+    def unread() -> Iterator[np.ndarray]:
+        raise AssertionError("a known camera's frames were read")
+        yield np.zeros((720, 1280, 3), np.uint8)
+
+    ahead = frames(data_dir / "videos" / "test_video.mp4", 20)
+    other = frames(wild_dir / "night_highway_istock.mp4", 20)  # another camera's shot
+    with Pipeline(None, LaneFinder(), None) as pipeline:
+        pipeline.prepare((1280, 720), 25.0)
+        assert pipeline.look_ahead(ahead[:3] + other) is None  # a cut at the 4th frame
+        waiting = pipeline.run(ahead[0]).result
+        assert waiting.scene is not None and not waiting.scene.estimated  # it waits
+        pipeline.prepare((1280, 720), 25.0)
+        horizon = pipeline.look_ahead(ahead)
+        assert horizon is not None and 0.5 * 720 < horizon < 0.7 * 720
+        first = pipeline.run(ahead[0]).result
+        assert first.scene is not None and first.scene.estimated
+        assert first.scene.horizon_y == horizon
+        assert first.lane is not None and first.lane.lane is not None
+    calibrated = load_calibration(default_calibration_path())
+    with Pipeline(calibrated, LaneFinder(), None) as pipeline:
+        pipeline.prepare((1280, 720), 25.0)
+        assert pipeline.look_ahead(unread()) is None
 
 
 def test_a_bonnet_ends_the_live_picture_and_a_moving_road_does_not() -> None:
