@@ -172,30 +172,39 @@ def test_report_problems_are_one_line(tmp_path: Path, test_video: Path) -> None:
     assert done.returncode == 0 and (tmp_path / "r_report.html").exists()
 
 
+def _still_video(path: Path, picture: np.ndarray, frames: int = 30) -> Path:
+    """A 25 fps video at `path` of `picture` (RGB) held for `frames` frames."""
+    from app.sinks import VideoSink
+
+    with VideoSink(path, (picture.shape[1], picture.shape[0]), 25.0, preset="medium") as sink:
+        for _ in range(frames):
+            sink.write(picture)
+    return path
+
+
+def _thumbnail(uri: str, flags: int = cv2.IMREAD_GRAYSCALE) -> np.ndarray:
+    """The picture of a thumbnail's JPEG data URI (grey, or BGR with `cv2.IMREAD_COLOR`)."""
+    data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
+    return np.asarray(cv2.imdecode(data, flags))
+
+
 def test_thumbnails_are_levelled_as_the_record_was(tmp_path: Path) -> None:
     """An event's thumbnail is the video's frame levelled by the turn the record says `process`
     levelled it by (its `roll_deg`, read off the footage), as with `--roll` stated: a level
     white bar of a picture turned 5 degrees comes out level; `--roll` overrides the record."""
     from app.report import event_thumbnails
-    from app.sinks import VideoSink
 
     level = np.full((360, 640, 3), 60, np.uint8)
     level[170:190, 120:520] = 255
     turn = cv2.getRotationMatrix2D((319.5, 179.5), 5.0, 1.0)
-    turned = cv2.warpAffine(level, turn, (640, 360))
-    video = tmp_path / "turned.mp4"
-    with VideoSink(video, (640, 360), 25.0, preset="medium") as sink:
-        for _ in range(30):
-            sink.write(turned)
+    video = _still_video(tmp_path / "turned.mp4", cv2.warpAffine(level, turn, (640, 360)))
     event = Event("lane_departure", 10, 20, 0.4, 0.8)
     rows = _rows(30)
     read = [{**row, "roll_deg": 5.0} if row["frame"] >= 5 else row for row in rows]
 
     def bar_lean(uri: str) -> float:
         """The lean in degrees (rising to the right) of the thumbnail's white bar."""
-        data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
-        grey: np.ndarray = np.asarray(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE))
-        ys, xs = np.nonzero(grey > 200)
+        ys, xs = np.nonzero(_thumbnail(uri) > 200)
         return float(-np.degrees(np.arctan(np.polyfit(xs, ys, 1)[0])))
 
     assert abs(bar_lean(event_thumbnails(video, read, [event], None)[0])) < 0.5
@@ -210,27 +219,19 @@ def test_thumbnails_of_a_lens_known_by_its_focal_length_are_not_undistorted(
     given `--focal-length`, and so left the shipped calibration out), an event's thumbnail is
     the frame as decoded, as `process` showed it; without it the frame is undistorted."""
     from app.report import event_thumbnails
-    from app.sinks import VideoSink
     from camera_cal import default_calibration_path, load_calibration
 
     picture = np.full((360, 640, 3), 60, np.uint8)
     picture[20:30, 40:600] = 255  # near the top edge, where the shipped lens bends most
-    video = tmp_path / "phone.mp4"
-    with VideoSink(video, (640, 360), 25.0, preset="medium") as sink:
-        for _ in range(30):
-            sink.write(picture)
+    video = _still_video(tmp_path / "phone.mp4", picture)
     event = Event("lane_departure", 10, 20, 0.4, 0.8)
     rows = _rows(30)
     stated = [{**row, "focal_mm": 30.0} for row in rows]
     shipped = load_calibration(default_calibration_path())
 
-    def picture_of(uri: str) -> np.ndarray:
-        data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
-        return np.asarray(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE), np.float64)
-
-    decoded = picture_of(event_thumbnails(video, rows, [event], None)[0])
-    known = picture_of(event_thumbnails(video, stated, [event], shipped)[0])
-    undistorted = picture_of(event_thumbnails(video, rows, [event], shipped)[0])
+    decoded = _thumbnail(event_thumbnails(video, rows, [event], None)[0]).astype(np.float64)
+    known = _thumbnail(event_thumbnails(video, stated, [event], shipped)[0])
+    undistorted = _thumbnail(event_thumbnails(video, rows, [event], shipped)[0])
     assert np.abs(known - decoded).max() == 0
     assert np.abs(undistorted - decoded).mean() > 2
 
@@ -240,20 +241,15 @@ def test_thumbnails_of_a_video_processed_reduced(tmp_path: Path) -> None:
     the reduced frames: its thumbnails are of frames decoded at that size, with the record's
     box where it was; a record of another aspect ratio is still refused."""
     from app.report import event_thumbnails
-    from app.sinks import VideoSink
 
     picture = np.full((360, 640, 3), 60, np.uint8)
     picture[200:260, 300:400] = 255  # the car, at (150, 100)-(200, 130) in the halved frames
-    video = tmp_path / "large.mp4"
-    with VideoSink(video, (640, 360), 25.0, preset="medium") as sink:
-        for _ in range(30):
-            sink.write(picture)
+    video = _still_video(tmp_path / "large.mp4", picture)
     event = Event("closing_fast", 10, 20, 0.4, 0.8, 1, 2.0)
     car = {"id": 1, "box": [150, 100, 200, 130], "score": 0.9}
     rows = [{**row, "size": [320, 180], "vehicles": [car]} for row in _rows(30)]
     (uri,) = event_thumbnails(video, rows, [event], None).values()
-    data = np.frombuffer(base64.b64decode(uri.split(",", 1)[1]), np.uint8)
-    thumb = np.asarray(cv2.imdecode(data, cv2.IMREAD_COLOR))  # BGR: the box drawn red
+    thumb = _thumbnail(uri, cv2.IMREAD_COLOR)  # BGR: the box drawn red
     red = (thumb[..., 2] > 180) & (thumb[..., 1] < 120)
     ys, xs = np.nonzero(red)
     scale = thumb.shape[1] / 320
