@@ -286,9 +286,10 @@ class Pipeline:
         """Read an unknown camera's horizon off the clip's first `frames` before they are
         processed, so that its stages need not wait for it (see `_wait`): a scene tracker of
         its own takes them in until it estimates a horizon, or the picture cuts to another
-        shot; the clip's scene then starts with its evidence (`SceneTracker.take_horizon`).
-        Call it after `prepare`, with the frames the clip will start with. The row read, or
-        None (a known camera's horizon, none found, or the frames ran out)."""
+        shot; the clip's scene gives the stages that horizon until it estimates its own
+        (`SceneTracker.take_horizon`). Call it after `prepare`, with the frames the clip will
+        start with. The row read, or None (a known camera's horizon, none found, or the frames
+        ran out)."""
         if not self._unknown_camera or self.size is None or self._started:
             return None
         scene, shots = self._new_scene(self.size, self._fps), ShotDetector()
