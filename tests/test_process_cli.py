@@ -243,7 +243,9 @@ def test_lanes_read_from_another_height_suggest_the_camera_height(
     }
     assert all(r.returncode == 0 for r in runs.values()), {k: r.stderr for k, r in runs.items()}
     notes = {name: r.stdout + r.stderr for name, r in runs.items()}
-    assert "pass --camera-height 1.9" in notes["untold"], notes["untold"]
+    # The height its lanes imply (1.24 m over the scale they read, 0.67-0.69 in its first 3 s).
+    implied = re.search(r"pass --camera-height ([\d.]+)", notes["untold"])
+    assert implied and 1.7 <= float(implied.group(1)) <= 2.0, notes["untold"]
     assert "--camera-height" not in notes["told"] + notes["tuned"]
     # The note's direction and height follow the scale.
     assert camera_height_note(1.0, 1.24, 3.7) is None
