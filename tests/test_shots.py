@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from app.sinks import VideoSink
 from app.sources import probe_video, read_frames
 from camera_cal import SceneGeometry, ShotDetector, same_camera
-from tests.helpers import moving_road, process_clip, read_record, run_cli
+from tests.helpers import moving_road, read_record, run_cli
 
 SIZE = (320, 180)
 
@@ -89,9 +89,15 @@ def test_a_shot_after_a_cut_is_processed_as_a_clip_of_its_own(
 ) -> None:
     """test_video, then a zoomed replay of project_cut_1 (its lower left 70 %: the horizon 120
     rows higher, the road's vanishing point near the right edge). After the cut the second shot
-    is what it is alone (`--start` at the cut): the same horizon, lanes and boxes, its vehicle
-    ids after the first shot's. Before, it kept the first shot's horizon and drew its lanes
-    162 px away from these."""
+    is what it is alone, processed frame by frame from the cut (as a clip that `process` starts
+    there would be, but for the horizon it reads ahead of a clip's first shot: a shot after a
+    cut waits for its own): the same horizon, lanes and boxes, its vehicle ids after the first
+    shot's. Before, it kept the first shot's horizon and drew its lanes 162 px away from
+    these."""
+    from app.assembly import build_stages
+    from app.pipeline import Pipeline
+    from app.record import frame_record
+
     first, second = (
         data_dir / "videos" / "test_video.mp4",
         data_dir / "videos" / "project_cut_1.mp4",
@@ -114,8 +120,13 @@ def test_a_shot_after_a_cut_is_processed_as_a_clip_of_its_own(
     assert f"cuts to another shot at {count / 25:.1f} s" in result.stderr
     rows = read_record(record)
     assert [r["shot"] for r in rows] == [0] * count + [1] * (len(rows) - count)
-    alone = process_clip(clip, tmp_path, "--calibration", "none", "--start", f"{count / 25}")
-    assert alone[0]["frame"] == count
+    compiled = probe_video(clip)
+    with Pipeline(None, *build_stages(), vehicles_in_worker=False) as pipeline:
+        pipeline.prepare(compiled.size, compiled.fps, count)
+        alone = [
+            frame_record(count + k, (count + k) / compiled.fps, compiled.size, out.result)
+            for k, out in enumerate(pipeline.stream(read_frames(clip, compiled, count)))
+        ]
     after = rows[count:]
     assert len(after) == len(alone)
     assert [r["horizon_y"] for r in after] == [r["horizon_y"] for r in alone]
