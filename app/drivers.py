@@ -18,7 +18,7 @@ from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
 from app.mounting import Mounting, check_mounting, video_mounting
-from app.pipeline import HORIZON_WAIT_S, Pipeline
+from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
 from app.runtime import warm_up_opencv
@@ -235,10 +235,9 @@ def camera_for(
 
 def look_ahead(pipeline: Pipeline, source: Path, info: VideoInfo, first: int, last: int) -> None:
     """Let a prepared `pipeline` read an unknown camera's horizon off the frames `source` starts
-    with at `first` (as long as its stages would wait for it, up to `last`) before it processes
-    them (`Pipeline.look_ahead`): a second decoder, for a known camera never started."""
-    end = min(last, first + round(HORIZON_WAIT_S * info.fps))
-    with closing(read_frames(source, info, first, end)) as frames:
+    with at `first` (up to `last`) before it processes them (`Pipeline.look_ahead`, which reads
+    as many as its stages would wait): a second decoder, for a known camera never started."""
+    with closing(read_frames(source, info, first, last)) as frames:
         pipeline.look_ahead(frames)
 
 

@@ -8,6 +8,7 @@ undistorted frame), so the vehicle stage can run in a worker process, one frame 
 from __future__ import annotations
 
 import functools
+import itertools
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -288,17 +289,17 @@ class Pipeline:
         its own takes them in until it estimates a horizon, or the picture cuts to another
         shot; the clip's scene gives the stages that horizon until it estimates its own
         (`SceneTracker.take_horizon`). Call it after `prepare`, with the frames the clip will
-        start with. The row read, or None (a known camera's horizon, none found, or the frames
-        ran out)."""
-        if not self._unknown_camera or self.size is None or self._started:
+        start with: as many are read as the stages would wait. The row read, or None (a known
+        camera's horizon, none found, or the frames ran out)."""
+        if not self._unknown_camera or self._scene is None or self.size is None or self._started:
             return None
         scene, shots = self._new_scene(self.size, self._fps), ShotDetector()
-        for frame in frames:
+        for frame in itertools.islice(frames, self._wait):
             undistorted = self.undistort(frame)
             if shots.update(undistorted):
                 return None  # what follows is another shot's
             geometry = scene.update(undistorted, frame)
-            if geometry.estimated and self._scene is not None:
+            if geometry.estimated:
                 self._scene.take_horizon(scene)
                 self._horizon_found = True
                 return geometry.horizon_y

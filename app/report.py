@@ -348,8 +348,9 @@ def event_thumbnails(
     record."""
     info = probe_video(video)
     size = tuple(rows[0].get("size", info.size))
-    if tuple(info.size) != size and tuple(within_size(info, min(size)).size) == size:
-        info = within_size(info, min(size))  # processed reduced (`process --max-size`)
+    reduced = within_size(info, min(size))
+    if tuple(info.size) != size and tuple(reduced.size) == size:
+        info = reduced  # processed reduced (`process --max-size`)
     if tuple(info.size) != size:
         raise InputError(
             f"--video {video} is {info.size[0]}x{info.size[1]} but the record's frames are "
