@@ -10,7 +10,7 @@ import pytest
 
 from vehicles.augment import Degradation, degrade_patch, degraded
 from vehicles.dataset import PatchSet, group_key, load_patches
-from vehicles.features import FeatureConfig, feature_maps, patch_features
+from vehicles.features import FeatureConfig, feature_maps, mirror_order, patch_features
 from vehicles.model import (
     ModelError,
     default_lowres_path,
@@ -110,6 +110,30 @@ def test_dense_path_equals_patch_path(data_dir: Path) -> None:
         y, x = cell_y * 8, cell_x * 8
         patch = np.ascontiguousarray(band[y : y + 64, x : x + 64])
         np.testing.assert_array_equal(maps.window(cell_y, cell_x), patch_features(patch, config))
+
+
+@pytest.mark.parametrize(
+    "config",
+    [FeatureConfig(), FeatureConfig(patch_size=32, spatial_size=8), FeatureConfig(orientations=8)],
+)
+def test_a_mirror_images_features_are_the_patchs_own_reordered(
+    patches: PatchSet, config: FeatureConfig
+) -> None:
+    """Flipped left to right, a patch's features are its own features in `mirror_order`: exactly
+    the same values (gradients are taken within cells), each where the mirror image puts it; the
+    order is its own inverse, and moves every HOG and spatial value of an asymmetric patch."""
+    order = mirror_order(config)
+    np.testing.assert_array_equal(order[order], np.arange(config.length))
+    for image in patches.images[::2000]:
+        size = (config.patch_size, config.patch_size)
+        patch = np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA))
+        features = patch_features(patch, config)
+        flipped = patch_features(np.ascontiguousarray(patch[:, ::-1]), config)
+        np.testing.assert_allclose(flipped, features[order], atol=1e-5)
+        assert not np.allclose(flipped, features, atol=1e-3)
+    shaped = config.lengths[0] + config.lengths[1]  # HOG and spatial values; histograms after
+    moved = order != np.arange(config.length)
+    assert moved[:shaped].mean() > 0.8 and not moved[shaped:].any()
 
 
 def _subset(patches: PatchSet, groups: np.ndarray, per_class: int, seed: int) -> PatchSet:

@@ -267,6 +267,24 @@ def feature_maps(rgb: NDArray[np.uint8], config: FeatureConfig) -> FeatureMaps:
     )
 
 
+def mirror_order(config: FeatureConfig) -> NDArray[np.intp]:
+    """The permutation that turns a patch's features into its mirror image's:
+    `patch_features(patch[:, ::-1])` equals `patch_features(patch)[mirror_order(config)]`.
+
+    Mirrored, a block's column and its cells' columns reverse and each orientation bin swaps
+    with its reflection about the vertical (gradients are taken within cells, one-sided at
+    their edges, so the swap is exact); spatial bins reverse their columns; the histograms stay.
+    It is its own inverse, so it also mirrors a linear model's weights: a mirrored window
+    scores with `weights[mirror_order(config)]`.
+    """
+    nb, k, bins = config.blocks_per_patch, config.cells_per_block, config.orientations
+    hog = np.arange(config.lengths[0]).reshape(nb, nb, 3, k, k, bins)[:, ::-1, :, :, ::-1, ::-1]
+    ss = config.spatial_size
+    spatial = np.arange(config.lengths[1]).reshape(ss, ss, 3)[:, ::-1] + config.lengths[0]
+    hist = np.arange(config.lengths[2]) + config.lengths[0] + config.lengths[1]
+    return np.concatenate([hog.ravel(), spatial.ravel(), hist]).astype(np.intp)
+
+
 def patch_features(rgb: NDArray[np.uint8], config: FeatureConfig) -> FloatArray:
     """Feature vector of one RGB patch (resized to patch_size if it is another size)."""
     size = config.patch_size
