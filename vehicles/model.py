@@ -84,6 +84,11 @@ class VehicleModel:
         z = np.clip(self.platt_a * np.asarray(decision, dtype=np.float64) + self.platt_b, -50, 50)
         return np.asarray(1.0 / (1.0 + np.exp(z)))
 
+    def decision_at(self, probability: float) -> float:
+        """The decision value whose calibrated probability is `probability` (in (0, 1)), less a
+        hair, so that every decision reaching that probability, rounded as it may be, reaches it."""
+        return float((np.log(1.0 / probability - 1.0) - self.platt_b) / self.platt_a) - 1e-6
+
     def predict_proba(self, features: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
         """Calibrated probability of a vehicle for each row of raw features."""
         return self.probability(self.decision_function(features))

@@ -11,10 +11,11 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from vehicles.config import Band
-from vehicles.features import FeatureConfig, FeatureMaps, feature_maps
+from vehicles.features import FeatureConfig, FeatureMaps, feature_maps, mirror_order
 from vehicles.model import VehicleModel
 
 
@@ -39,6 +40,21 @@ class LinearWeights:
             spatial=w[n_hog : n_hog + n_spatial].reshape(cfg.spatial_size**2, 3).astype(np.float32),
             hist=w[n_hog + n_spatial :].astype(np.float32),
             bias=b,
+            config=cfg,
+        )
+
+    def mirrored(self) -> LinearWeights:
+        """The weights that score each window's mirror image: a feature's weight moves to where
+        the mirror image puts that feature (`mirror_order`); the bias stays."""
+        cfg = self.config
+        n_hog, n_spatial, _ = cfg.lengths
+        flat = np.concatenate([self.hog.ravel(), self.spatial.ravel(), self.hist])
+        flat = flat[mirror_order(cfg)]
+        return LinearWeights(
+            hog=flat[:n_hog].reshape(self.hog.shape),
+            spatial=flat[n_hog : n_hog + n_spatial].reshape(self.spatial.shape),
+            hist=flat[n_hog + n_spatial :],
+            bias=self.bias,
             config=cfg,
         )
 
@@ -79,6 +95,33 @@ def score_windows(maps: FeatureMaps, weights: LinearWeights) -> NDArray[np.float
     return score + weights.bias
 
 
+def score_windows_at(
+    maps: FeatureMaps, weights: LinearWeights, rows: NDArray[np.intp], cols: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """Decision values of the windows whose top-left cells are (`rows`, `cols`): what
+    `score_windows` gives there, for a few windows without correlating the whole band."""
+    cfg = weights.config
+    nb, nc = cfg.blocks_per_patch, cfg.cells_per_patch
+    s, ss = cfg.pixels_per_cell // cfg.spatial_factor, cfg.spatial_size
+    # Each window's blocks and spatial bins, read through strided views of the maps: (n,
+    # values, rows, columns), dotted without BLAS (whose threads cost more than the sums here).
+    blocks = sliding_window_view(maps.blocks, (nb, nb), axis=(0, 1))[rows, cols]
+    hog = weights.hog.reshape(nb, nb, -1)
+    score = np.einsum("nkij,ijk->n", blocks, hog, dtype=np.float64)
+    spatial = sliding_window_view(maps.spatial, (ss, ss), axis=(0, 1))[rows * s, cols * s]
+    binned = weights.spatial.reshape(ss, ss, 3)
+    score += np.einsum("ncij,ijc->n", spatial, binned, dtype=np.float64)
+    per_cell = maps.histograms @ weights.hist
+    integral = np.pad(per_cell, ((1, 0), (1, 0))).cumsum(0).cumsum(1)
+    score += (
+        integral[rows + nc, cols + nc]
+        - integral[rows, cols + nc]
+        - integral[rows + nc, cols]
+        + integral[rows, cols]
+    )
+    return np.asarray(score + weights.bias, np.float64)
+
+
 @dataclass(frozen=True, eq=False)
 class BandHits:
     """Every window of one band: boxes in frame pixels and decision values."""
@@ -88,6 +131,9 @@ class BandHits:
     boxes: NDArray[np.float64]  # (n, 4)
     decisions: NDArray[np.float64]  # (n,)
     verified: NDArray[np.float64] | None = None  # (n,) the verifier's decisions, when one is used
+    # (n,) the model's decisions of each window's mirror image where its own decision reached
+    # the search's `mirror_from`, NaN elsewhere; None: not scored
+    mirrored: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)
@@ -139,10 +185,14 @@ def search_band(
     view: View,
     reference_horizon: float,
     verifier: LinearWeights | None = None,
+    mirrored: LinearWeights | None = None,
+    mirror_from: float = 0.0,
 ) -> BandHits | None:
     """Score every window of one band (HOG computed once for the band at its scale), by
-    `weights` and, when given, by the `verifier` on the same features; None when the band does
-    not fit in the live picture or its windows would be smaller than its `min_window_px`."""
+    `weights` and, when given, by the `verifier` on the same features, and by the `mirrored`
+    weights (`LinearWeights.mirrored`) the windows whose decision reaches `mirror_from` (a few:
+    the rest could not heat anyway); None when the band does not fit in the live picture or its
+    windows would be smaller than its `min_window_px`."""
     cfg = weights.config
     x0, y0, x1, y1, scale = band_geometry(band, view, cfg.patch_size, reference_horizon)
     window = scale * cfg.patch_size
@@ -167,6 +217,11 @@ def search_band(
     decision = score_windows(maps, weights)[::step, ::step]
     verified = None if verifier is None else score_windows(maps, verifier)[::step, ::step].ravel()
     cy, cx = np.mgrid[0 : decision.shape[0], 0 : decision.shape[1]] * step
+    flipped = None
+    if mirrored is not None:
+        flipped = np.full(decision.size, np.nan)
+        due = np.flatnonzero(decision.ravel() >= mirror_from)
+        flipped[due] = score_windows_at(maps, mirrored, cy.ravel()[due], cx.ravel()[due])
     # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
     sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
     px, py = cx.ravel() * cfg.pixels_per_cell, cy.ravel() * cfg.pixels_per_cell
@@ -179,4 +234,4 @@ def search_band(
         ],
         axis=1,
     )
-    return BandHits(band, scale * cfg.patch_size, boxes, decision.ravel(), verified)
+    return BandHits(band, scale * cfg.patch_size, boxes, decision.ravel(), verified, flipped)
