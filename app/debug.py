@@ -142,7 +142,7 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
                 color,
                 2,
             )
-        for box in d.vetoed:  # the model was sure, the verifier was not: white, crossed
+        for box in d.vetoed:  # sure, but vetoed (verifier, mirror image): white, crossed
             x1, y1, x2, y2 = (round(float(v)) for v in box)
             cv2.rectangle(hits, (x1, y1), (x2, y2), (255, 255, 255), 1)
             cv2.line(hits, (x1, y1), (x2, y2), (255, 255, 255), 1)

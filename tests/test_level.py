@@ -20,9 +20,7 @@ def _rear(turn_deg: float, seed: int = 0) -> np.ndarray:
         picture[top:bottom, 50:190] = grey
     picture = np.clip(picture + rng.normal(0, 4, picture.shape), 0, 255).astype(np.uint8)
     turn = cv2.getRotationMatrix2D((119.5, 119.5), turn_deg, 1.0)
-    turned: np.ndarray = cv2.warpAffine(
-        picture, turn, (240, 240), borderMode=cv2.BORDER_REPLICATE
-    )
+    turned: np.ndarray = cv2.warpAffine(picture, turn, (240, 240), borderMode=cv2.BORDER_REPLICATE)
     return turned
 
 

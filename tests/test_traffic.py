@@ -92,7 +92,9 @@ def test_traffic_keeping_left_is_found_as_well_as_traffic_keeping_right(
 ) -> None:
     """project_cut_2 mirrored (traffic keeping left, its median barrier on the right) and run
     with `--traffic left`: the boxes land on the mirrored labels (precision >= 0.95), at least
-    as many cars are found as when roadview is not told, and no more false boxes."""
+    as many cars are found as when roadview is not told, and no more false boxes. Not told, the
+    barrier's windows are not boxed either: their mirror images are the barrier the model knows
+    (precision >= 0.95: 1.000, 0.876 before windows had to stand by their mirror image)."""
     video, labels = (
         data_dir / "videos" / "project_cut_2.mp4",
         data_dir / "labels" / "project_cut_2.json",
@@ -108,6 +110,6 @@ def test_traffic_keeping_left_is_found_as_well_as_traffic_keeping_right(
         records = process_clip(clip, folder, "--calibration", "none", "--traffic", side)
         scores[side] = evaluate(truth, records)["vehicles"]["iou_0.5"]
     told, untold = scores["left"], scores["right"]
-    assert told["precision"] >= 0.95, scores
+    assert told["precision"] >= 0.95 and untold["precision"] >= 0.95, scores
     assert told["true_positives"] >= untold["true_positives"], scores
     assert told["false_positives"] <= untold["false_positives"], scores

@@ -28,7 +28,7 @@ class VehicleDebug:
     history_heat: NDArray[np.float32]
     regions: Detections
     heat_threshold: float
-    vetoed: NDArray[np.float64]  # (n, 4) windows the model was sure of and the verifier was not
+    vetoed: NDArray[np.float64]  # (n, 4) windows the model was sure of, vetoed (verifier, mirror)
     # The picture the windows read, where it is not the frame itself (`VehicleDetector.seen`):
     # the mean of this many of the last frames, and with its colour smoothed or not.
     seen: NDArray[np.uint8] | None = None
@@ -44,17 +44,20 @@ class Scorer:
     weights: LinearWeights
     verifier: VehicleModel | None = None
     verifier_weights: LinearWeights | None = None
+    mirrored_weights: LinearWeights | None = None  # the model's, of each window's mirror image
 
     @classmethod
     def of(cls, model: VehicleModel, verifier: VehicleModel | None = None) -> Scorer:
         """The scorer of `model`, checked by `verifier` (trained on the same features)."""
         if verifier is not None and verifier.config != model.config:
             raise ModelError("the verifier was trained on other features than the model")
+        weights = LinearWeights.from_model(model)
         return cls(
             model,
-            LinearWeights.from_model(model),
+            weights,
             verifier,
             None if verifier is None else LinearWeights.from_model(verifier),
+            weights.mirrored(),
         )
 
 
@@ -86,16 +89,31 @@ def parts_of_larger(
     small = np.flatnonzero(strong & (ratios > 0))
     if len(small) == 0:
         return parts
-    centres = (boxes[small, :2] + boxes[small, 2:]) / 2
     larger = strong[None, :] & (sizes[None, :] >= (ratios[small] * sizes[small])[:, None])
-    inside = (
-        (centres[:, None, 0] >= boxes[None, :, 0])
-        & (centres[:, None, 0] <= boxes[None, :, 2])
-        & (centres[:, None, 1] >= boxes[None, :, 1])
-        & (centres[:, None, 1] <= boxes[None, :, 3])
-    )
-    parts[small] = (larger & inside).any(axis=1)
+    parts[small] = (larger & centres_within(boxes[small], boxes)).any(axis=1)
     return parts
+
+
+def centres_within(boxes: NDArray[np.float64], others: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(n, m): whether the centre of each of `boxes` lies in each of `others` (edges included)."""
+    centres = (boxes[:, :2] + boxes[:, 2:]) / 2
+    return np.asarray(
+        (centres[:, None, 0] >= others[None, :, 0])
+        & (centres[:, None, 0] <= others[None, :, 2])
+        & (centres[:, None, 1] >= others[None, :, 1])
+        & (centres[:, None, 1] <= others[None, :, 3])
+    )
+
+
+def mirror_backed(
+    boxes: NDArray[np.float64], symmetric: NDArray[np.bool_], backing: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """Which windows (`boxes`) stand by their mirror image: those `symmetric` (their mirror
+    image reads as a vehicle too), and those whose centre lies in a `backing` window (one sure
+    of itself and of its mirror image): a car's corner seen partly from its side is no mirror
+    image of itself, its middle is."""
+    backed = centres_within(boxes, boxes[backing]).any(axis=1) if backing.any() else False
+    return np.asarray(symmetric | backed)
 
 
 def frame_mean(frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
@@ -302,38 +320,44 @@ class VehicleDetector:
         parity: int | None = None,
         view: View | None = None,
         dark: bool = False,
+        min_probability: float | None = None,
     ) -> tuple[BandHits, ...]:
-        """Window scores of the bands searched this frame (all bands when parity is None)."""
-        bands = self.config.bands
-        if parity is not None:
-            bands = bands[parity::2]
+        """Window scores of the bands searched this frame (all bands when parity is None), and
+        of their mirror images where the window reaches `min_probability` (None: the config's)
+        and the config checks them."""
+        cfg = self.config
+        bands = cfg.bands if parity is None else cfg.bands[parity::2]
         where = view or self.view((frame.shape[1], frame.shape[0]))
         scorers = self.scorers_for(where, dark)
+        least = cfg.min_probability if min_probability is None else min_probability
         found = (
             search_band(
                 frame,
                 band,
-                scorers[band.patch].weights,
+                scorer.weights,
                 where,
-                self.config.reference_horizon,
-                scorers[band.patch].verifier_weights,
+                cfg.reference_horizon,
+                scorer.verifier_weights,
+                scorer.mirrored_weights if cfg.mirror_checks(band) else None,
+                scorer.model.decision_at(least),
             )
             for band in bands
-            if band.patch in scorers
+            if (scorer := scorers.get(band.patch)) is not None
         )
         return tuple(hit for hit in found if hit is not None)
 
     def window_terms(
         self, hits: Sequence[BandHits], view: View, dark: bool = False
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], ...]:
         """For every window of `hits`, in order: P(vehicle) by its band's model, its verifier's
-        P(vehicle) (1 where that model has none), and the weight of its heat. A window steps one
+        P(vehicle) (1 where that model has none), the weight of its heat, and the model's
+        P(vehicle) of its mirror image (1 where not scored). A window steps one
         cell: a 4-cell model's windows step a quarter of their side, the 8-cell model's an
         eighth, so fewer of them overlap a small car: each of its hits heats 8 / 4 = 2 times as
         much (the square, 4, spoilt the boxes of 34-40 px cars; tried)."""
         cells = self.model.config.cells_per_patch
         scorers = self.scorers_for(view, dark)
-        terms: list[tuple[NDArray[np.float64], ...]] = [(np.zeros(0),) * 3]
+        terms: list[tuple[NDArray[np.float64], ...]] = [(np.zeros(0),) * 4]
         for hit in hits:
             scorer = scorers[hit.band.patch]
             n = len(hit.decisions)
@@ -342,10 +366,14 @@ class VehicleDetector:
                 if scorer.verifier is None or hit.verified is None
                 else scorer.verifier.probability(hit.verified)
             )
+            mirror = (
+                np.ones(n)
+                if hit.mirrored is None
+                else np.where(np.isnan(hit.mirrored), 1.0, scorer.model.probability(hit.mirrored))
+            )
             density = np.full(n, cells / scorer.model.config.cells_per_patch)
-            terms.append((scorer.model.probability(hit.decisions), checked, density))
-        proba, checked, density = (np.concatenate(part) for part in zip(*terms, strict=True))
-        return proba, checked, density
+            terms.append((scorer.model.probability(hit.decisions), checked, density, mirror))
+        return tuple(np.concatenate(part) for part in zip(*terms, strict=True))
 
     def process(
         self,
@@ -376,11 +404,15 @@ class VehicleDetector:
         dark = cfg.is_dark(road_grey)
         rows = self.band_rows(view)
         seen, averaged, smoothed = self._read(frame, road_grey, grain, view.scale_height, rows)
-        hits = self.search(seen, parity, view, dark)
+        least = cfg.min_probability_at(road_grey)
+        hits = self.search(seen, parity, view, dark, least)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        proba, checked, density = self.window_terms(hits, view, dark)
-        strong = proba >= cfg.min_probability_at(road_grey)
+        proba, checked, density, mirror = self.window_terms(hits, view, dark)
+        strong = proba >= least
         sure = checked >= cfg.min_verified
+        if cfg.min_mirrored is not None:
+            backing = strong & sure & (mirror >= least)
+            sure &= mirror_backed(boxes, mirror >= cfg.min_mirrored, backing)
         vetoed = boxes[strong & ~sure]
         strong &= sure
         if overlays:
