@@ -111,14 +111,8 @@ def score_windows_at(
     spatial = sliding_window_view(maps.spatial, (ss, ss), axis=(0, 1))[rows * s, cols * s]
     binned = weights.spatial.reshape(ss, ss, 3)
     score += np.einsum("ncij,ijc->n", spatial, binned, dtype=np.float64)
-    per_cell = maps.histograms @ weights.hist
-    integral = np.pad(per_cell, ((1, 0), (1, 0))).cumsum(0).cumsum(1)
-    score += (
-        integral[rows + nc, cols + nc]
-        - integral[rows, cols + nc]
-        - integral[rows + nc, cols]
-        + integral[rows, cols]
-    )
+    cells = sliding_window_view(maps.histograms, (nc, nc), axis=(0, 1))[rows, cols]
+    score += np.einsum("nkij,k->n", cells, weights.hist, dtype=np.float64)
     return np.asarray(score + weights.bias, np.float64)
 
 
@@ -221,7 +215,8 @@ def search_band(
     if mirrored is not None:
         flipped = np.full(decision.size, np.nan)
         due = np.flatnonzero(decision.ravel() >= mirror_from)
-        flipped[due] = score_windows_at(maps, mirrored, cy.ravel()[due], cx.ravel()[due])
+        if len(due):
+            flipped[due] = score_windows_at(maps, mirrored, cy.ravel()[due], cx.ravel()[due])
     # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
     sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
     px, py = cx.ravel() * cfg.pixels_per_cell, cy.ravel() * cfg.pixels_per_cell
