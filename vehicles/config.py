@@ -146,7 +146,8 @@ class DetectorConfig:
     # project video's median barrier on the left, so the model knows that barrier there and not
     # on the right, where it stands where traffic keeps left (or a rear camera sees it): read
     # mirrored, it is known again. The shared clips mirrored and not told so: precision 0.936 ->
-    # 1.000, at 0.9 (a window and its mirror image alike) 0.965 as they are (README).
+    # 1.000; at 0.9 (a window and its mirror image alike, in every band) the clips as they are
+    # lost precision, 1.000 -> 0.965 (README).
     min_mirrored: float | None = 0.5
     # ... in the bands whose windows are at least this share of the height (96 px at 720 rows):
     # in smaller ones a car has few pixels for its mirror image to read as one (on the shared

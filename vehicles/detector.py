@@ -394,7 +394,9 @@ class VehicleDetector:
         captions or parts of the car, do not heat; on a dark road, by the scene's `road_grey`,
         the windows read the mean of the last frames and less sure ones heat
         (`DetectorConfig.min_probability_at`); on a road of the scene's `grain` they read the
-        picture with its colour smoothed, and from more grain averaged too: `seen`)."""
+        picture with its colour smoothed, and from more grain averaged too: `seen`). A window
+        heats where its verifier agrees and, in the larger bands, where it stands by its mirror
+        image (`mirror_backed`)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
