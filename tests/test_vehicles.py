@@ -13,6 +13,7 @@ import pytest
 from app.evaluate import FrameLabels, evaluate, iou, load_labels
 from app.record import vehicles_record
 from app.sources import probe_video, read_frames
+from app.traffic import mirrored_detections
 from camera_cal import build_undistorter, default_calibration_path, load_calibration
 from tests.helpers import process_clip, raised_camera
 from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
@@ -668,10 +669,7 @@ def test_windows_whose_mirror_image_is_no_vehicle_box_no_barrier(
         )
         records = []
         for index, frame in enumerate(frames):
-            found = detector.process(frame).detections
-            boxes = found.boxes.copy()
-            boxes[:, [0, 2]] = info.size[0] - boxes[:, [2, 0]]
-            back = Detections.from_boxes(boxes, found.scores, found.ids)
+            back = mirrored_detections(detector.process(frame).detections, info.size[0])
             records.append({"frame": index, "vehicles": vehicles_record(back), "lane": None})
         scores[check] = evaluate(labels, records)["vehicles"]["iou_0.5"]
     checked, unchecked = scores[0.5], scores[None]
