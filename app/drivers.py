@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Generator, Sequence
 from contextlib import ExitStack, closing
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -24,6 +24,7 @@ from app.record import frame_record
 from app.runtime import warm_up_opencv
 from app.sinks import AudioSpan, ImageSink, RecordSink, VideoSink
 from app.sources import (
+    Frame,
     VideoInfo,
     decoding_notes,
     image_focal_mm,
@@ -234,10 +235,16 @@ def camera_for(
 
 
 def look_ahead(pipeline: Pipeline, source: Path, info: VideoInfo, first: int, last: int) -> None:
-    """Let a prepared `pipeline` read an unknown camera's horizon off the frames `source` starts
-    with at `first` (up to `last`) before it processes them (`Pipeline.look_ahead`, which reads
-    as many as its stages would wait): a second decoder, for a known camera never started."""
-    with closing(read_frames(source, info, first, last)) as frames:
+    """Let a prepared `pipeline` read an unknown camera's horizon ahead of each shot of
+    `source` from frame `first` (up to `last`): the first shot's now (`Pipeline.look_ahead`,
+    which reads as many frames as its stages would wait), a shot's after a cut as it comes
+    (`Pipeline.frames_from`). A second decoder, for a known camera never started."""
+
+    def frames_from(k: int) -> Generator[Frame, None, None]:
+        return read_frames(source, info, first + k, last)
+
+    pipeline.frames_from = frames_from
+    with closing(frames_from(0)) as frames:
         pipeline.look_ahead(frames)
 
 

@@ -11,7 +11,8 @@ import functools
 import itertools
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
+from contextlib import closing
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -102,6 +103,9 @@ class _Started:
     index: int = 0  # frames started before it since `prepare`
     cut: bool = False  # the first frame of another shot (see `camera_cal.shots`)
     roll_deg: float = 0.0  # the turn levelled away in this frame
+    # The lane stage's warp as of this frame (its metres; with the worker, the next frame is
+    # started before this one finishes, and at a cut its warp is another scene's).
+    view: BirdsEye | None = None
 
 
 class Pipeline:
@@ -126,6 +130,11 @@ class Pipeline:
     it, the turn they imply is kept for a note (`roll_contradicted`). The stages and the scene
     go on with their history, which the turn moves by a few pixels: started over, as at a cut,
     the turned shared clips lost more frames to it than they gained (README).
+
+    An unknown camera's stages wait for its horizon (see `_wait`) unless it is read ahead: off
+    the clip's first frames by `look_ahead`, and off a new shot's after a cut through
+    `frames_from`, where the driver can read the clip again from its k-th frame since `prepare`
+    (a second decoder; `prepare` clears it).
     """
 
     def __init__(
@@ -169,6 +178,7 @@ class Pipeline:
         self._id_offset = 0  # vehicle ids the earlier shots used
         self._last_id = 0
         self.cuts: list[int] = []  # frame numbers where a new shot started
+        self.frames_from: Callable[[int], Generator[Frame, None, None]] | None = None
         self._horizon_found = False  # the footage showed its horizon in some frame
         self._roll = 0.0  # the turn the frames are levelled by
         self._level: RollReading | None = None  # the edges' lean, read until it is known
@@ -231,6 +241,7 @@ class Pipeline:
         self._last = None
         self._shot_start = self._id_offset = self._last_id = 0
         self.cuts = []
+        self.frames_from = None
         self._horizon_found = False
         self._wait = round(HORIZON_WAIT_S * fps) if self._unknown_camera else 0
         frame_bytes = size[0] * size[1] * 3
@@ -293,6 +304,13 @@ class Pipeline:
         camera's horizon, none found, or the frames ran out)."""
         if not self._unknown_camera or self._scene is None or self.size is None or self._started:
             return None
+        return self._horizon_ahead(frames)
+
+    def _horizon_ahead(self, frames: Iterable[Frame]) -> float | None:
+        """The horizon a fresh scene tracker reads off `frames`, the current shot's from its
+        first on, given to the shot's scene (see `look_ahead`); None if none was read before the
+        stages would stop waiting, another cut, or the frames' end."""
+        assert self._scene is not None and self.size is not None
         scene, shots = self._new_scene(self.size, self._fps), ShotDetector()
         for frame in itertools.islice(frames, self._wait):
             undistorted = self.undistort(frame)
@@ -404,6 +422,13 @@ class Pipeline:
         cut = self._shots.update(undistorted) and self._fps > 0
         if cut:  # another shot: its scene measured afresh, the stages' history forgotten
             self._scene = self._scene_after_cut(undistorted, self._scene)
+            if (
+                self._unknown_camera
+                and not self._scene.current.estimated
+                and self.frames_from is not None
+            ):  # a fresh scene: its horizon read ahead off the shot's frames, this one first
+                with closing(self.frames_from(index)) as ahead:
+                    self._horizon_ahead(ahead)
             # Another camera may be turned: read afresh, unless a turn was found already (it
             # stands for the whole footage, as a stated one does).
             if self.levelled is None and self.roll_contradicted is None:
@@ -425,7 +450,16 @@ class Pipeline:
         if held:
             waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
             return _Started(
-                undistorted, scene, placement, waiting, timings, True, index, cut, self._roll
+                undistorted,
+                scene,
+                placement,
+                waiting,
+                timings,
+                True,
+                index,
+                cut,
+                self._roll,
+                self.lanes.current_view if self.lanes is not None else None,
             )
         if self._worker is not None:
             self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
@@ -441,7 +475,18 @@ class Pipeline:
             )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
-        return _Started(undistorted, scene, placement, lane, timings, False, index, cut, self._roll)
+        return _Started(
+            undistorted,
+            scene,
+            placement,
+            lane,
+            timings,
+            False,
+            index,
+            cut,
+            self._roll,
+            self.lanes.current_view if self.lanes is not None else None,
+        )
 
     def _read_roll(self, undistorted: Frame, detections: Detections, index: int) -> None:
         """Take in the leans of the tracked vehicles of the frame started as `index`; once they
@@ -450,9 +495,7 @@ class Pipeline:
         if self._level is None or not len(detections):
             return
         tracked = detections.ids > 0
-        turn = self._level.update(
-            undistorted, detections.boxes[tracked], detections.ids[tracked]
-        )
+        turn = self._level.update(undistorted, detections.boxes[tracked], detections.ids[tracked])
         if turn is None:
             if self._level.full:  # level, or leaning every which way: read no more
                 self._level = None
@@ -519,7 +562,7 @@ class Pipeline:
         # Metres follow the warp placed from the scene: the lane stage's, or without it the
         # default lane config's for the same placement.
         current = (
-            self.lanes.current_view
+            started.view
             if self.lanes is not None
             else _scene_warp(
                 (undistorted.shape[1], undistorted.shape[0]),

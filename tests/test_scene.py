@@ -326,11 +326,12 @@ def test_an_unknown_camera_reads_its_horizon_ahead(wild_dir: Path, tmp_path: Pat
     assert abs(rows[0]["horizon_y"] - waiting[-1]["horizon_y"]) < 0.02 * info.size[1]
 
 
-def test_the_horizon_is_read_ahead_only_for_an_unknown_cameras_first_shot(
+def test_the_horizon_is_read_ahead_only_for_an_unknown_camera_and_off_its_own_shot(
     data_dir: Path, wild_dir: Path
 ) -> None:
     """`look_ahead` reads the horizon of the shot the clip starts with: a cut before it is found
-    leaves the stages to wait as before; a known camera's frames are not even decoded."""
+    leaves the first shot's stages to wait (the shot after the cut reads its own as it comes,
+    see test_shots); a known camera's frames are not even decoded."""
     from app.pipeline import Pipeline
     from camera_cal import default_calibration_path, load_calibration
     from lanes.finder import LaneFinder

@@ -95,7 +95,15 @@ def test_a_reset_before_the_next_frame_leaves_the_frames_in_flight_alone() -> No
     assert [s.count for s in seen] == [1, 2, 1, 2]  # type: ignore[attr-defined]
 
 
-def test_pipeline_with_the_vehicle_worker_equals_in_process(test_video: Path) -> None:
+def test_pipeline_with_the_vehicle_worker_equals_in_process(
+    test_video: Path, data_dir: Path
+) -> None:
+    """The worker runs one frame ahead of the compositor, also across a cut to another camera
+    whose horizon is read ahead: the frame before the cut is measured by its own scene's warp,
+    not by the next shot's (the lanes started the cut's frame before the frame before it was
+    finished, and its vehicles were put 15-32 m by a warp they were not in)."""
+    import cv2
+
     from app.assembly import build_stages
     from app.pipeline import Pipeline
     from app.record import frame_record
@@ -103,17 +111,29 @@ def test_pipeline_with_the_vehicle_worker_equals_in_process(test_video: Path) ->
 
     info = probe_video(test_video)
     frames = list(read_frames(test_video, info, 0, 12))
+    # A zoomed replay of project_cut_1: its lower left 70 %, the horizon 120 rows higher.
+    replay = data_dir / "videos" / "project_cut_1.mp4"
+    frames += [
+        np.ascontiguousarray(cv2.resize(f[216:720, 0:896], info.size))
+        for f in read_frames(replay, probe_video(replay), 0, 16)
+    ]
 
     def records(in_worker: bool) -> list[dict[str, Any]]:
         lanes, vehicles = build_stages()
         with Pipeline(None, lanes, vehicles, vehicles_in_worker=in_worker) as pipeline:
-            pipeline.prepare(info.size)
-            return [
-                frame_record(k, 0.0, info.size, out.result)
+            pipeline.prepare(info.size, 25.0)
+            pipeline.look_ahead(iter(frames))
+            pipeline.frames_from = lambda k: (f for f in frames[k:])
+            out = [
+                frame_record(k, k / 25.0, info.size, out.result)
                 for k, out in enumerate(pipeline.stream(iter(frames)))
             ]
+            assert pipeline.cuts == [12]
+            return out
 
-    assert records(True) == records(False)
+    alone, in_worker = records(False), records(True)
+    assert alone[11]["vehicles"] and alone[12]["lane"]  # the replay's horizon read ahead
+    assert in_worker == alone
 
 
 def test_worker_error_reaches_the_caller_and_the_child_stops() -> None:
