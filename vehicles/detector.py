@@ -223,7 +223,8 @@ class VehicleDetector:
         timed = self.config.at_rate(self.fps)
         # Region boxes come from heat averaged over the recent frames: centred that far back.
         tracker = Tracker(timed.track, lag=(timed.heat.recent - 1) / 2)
-        store: deque[NDArray[np.uint8]] = deque(maxlen=max(timed.dark_frames, timed.grain_frames))
+        longest = max(timed.dark_frames, timed.grainy_dark_frames, timed.grain_frames)
+        store: deque[NDArray[np.uint8]] = deque(maxlen=longest)
         return Heatmap(timed.heat), tracker, store
 
     def reset(self, fps: float | None = None) -> None:
@@ -242,11 +243,12 @@ class VehicleDetector:
         scale_height: float | None = None,
     ) -> NDArray[np.uint8]:
         """The picture the windows read: on a road at dusk or darker (`road_grey` under
-        `DetectorConfig.dark_road[2]`) the mean of the last `dark_frames` frames, this one
-        included, on a very grainy one (`grain` from `DetectorConfig.very_grainy`) of the last
-        `grain_frames`, else the frame itself (and the stored frames are forgotten); on a
-        grainy road, in any light, with its colour smoothed (`DetectorConfig.chroma_sigma_at`) in
-        proportion to `scale_height` (`View.scale_height`; None: the frame's height)."""
+        `DetectorConfig.dark_road[2]`) the mean of the last frames, this one included (as many
+        as `DetectorConfig.averaged_frames` says for its `grain`), on a very grainy one (`grain`
+        from `DetectorConfig.very_grainy`) of the last `grain_frames`, else the frame itself
+        (and the stored frames are forgotten); on a grainy road, in any light, with its colour
+        smoothed (`DetectorConfig.chroma_sigma_at`) in proportion to `scale_height`
+        (`View.scale_height`; None: the frame's height)."""
         return self._read(frame, road_grey, grain, scale_height)[0]
 
     def _read(
