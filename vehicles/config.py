@@ -109,8 +109,9 @@ class DetectorConfig:
     # `dark_frames` frames: the encoder renders a dim sensor's grain anew in every frame, while a
     # car ahead stays where it was (the grainy copies' false boxes, README); 1: the frame alone.
     # From `very_grainy` the mean of `grainy_dark_frames`: on copies of the shared clips dimmed
-    # to a black road (grain read 0.1-0.4) 2 frames kept 466 cars and 23 false boxes against
-    # 434 / 31 with 3, on those dimmed to dusk with grain 2.4 163 / 7 against 160 / 0 (README).
+    # to a black road (grain read 0.1-0.4) 2 frames keep 455 cars and 21 false boxes against
+    # 434 / 31 with 3 (each with its dark verifier), on those dimmed to dusk with grain 2.4
+    # 163 / 7 against 160 / 0 (README).
     dark_frames: int = 2
     grainy_dark_frames: int = 3
     # ... and of `grain_frames` where the grain reaches `dark_grain` too: copies dimmed to dusk
