@@ -455,11 +455,11 @@ class Pipeline:
                 placement,
                 waiting,
                 timings,
-                True,
-                index,
-                cut,
-                self._roll,
-                self.lanes.current_view if self.lanes is not None else None,
+                held=True,
+                index=index,
+                cut=cut,
+                roll_deg=self._roll,
+                view=self.lanes.current_view if self.lanes is not None else None,
             )
         if self._worker is not None:
             self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
@@ -481,11 +481,10 @@ class Pipeline:
             placement,
             lane,
             timings,
-            False,
-            index,
-            cut,
-            self._roll,
-            self.lanes.current_view if self.lanes is not None else None,
+            index=index,
+            cut=cut,
+            roll_deg=self._roll,
+            view=self.lanes.current_view if self.lanes is not None else None,
         )
 
     def _read_roll(self, undistorted: Frame, detections: Detections, index: int) -> None:
