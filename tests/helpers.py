@@ -136,3 +136,11 @@ def raised_camera(frame: NDArray[np.uint8], horizon: float, factor: float) -> ND
     source = np.where(rows > horizon, horizon + (rows - horizon) / factor, rows)
     map_x, map_y = np.meshgrid(np.arange(width, dtype=np.float32), source.astype(np.float32))
     return np.asarray(cv2.remap(frame, map_x, map_y, cv2.INTER_LINEAR), np.uint8)
+
+
+def zoomed_replay(frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """A 1280x720 frame as a zoomed replay shows it: its lower left 70 % (the horizon 120 rows
+    higher, the road's vanishing point near the right edge) scaled back to the full frame."""
+    height, width = frame.shape[:2]
+    part = frame[round(0.3 * height) :, : round(0.7 * width)]
+    return np.ascontiguousarray(cv2.resize(part, (width, height)))

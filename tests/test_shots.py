@@ -7,7 +7,6 @@ from __future__ import annotations
 from contextlib import closing
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 from numpy.typing import NDArray
@@ -15,7 +14,7 @@ from numpy.typing import NDArray
 from app.sinks import VideoSink
 from app.sources import probe_video, read_frames
 from camera_cal import SceneGeometry, ShotDetector, same_camera
-from tests.helpers import moving_road, read_record, run_cli
+from tests.helpers import moving_road, read_record, run_cli, zoomed_replay
 
 SIZE = (320, 180)
 
@@ -111,8 +110,7 @@ def test_a_shot_after_a_cut_is_processed_as_a_clip_of_its_own(
             sink.write(frame)
             count += 1
         for frame in read_frames(second, zoomed):
-            part = frame[216:720, 0:896]
-            sink.write(np.ascontiguousarray(cv2.resize(part, info.size)))
+            sink.write(zoomed_replay(frame))
     record = tmp_path / "all.jsonl"
     result = run_cli(
         "process", clip, "-o", tmp_path / "all.mp4", "--json", record, "--calibration", "none"

@@ -102,21 +102,16 @@ def test_pipeline_with_the_vehicle_worker_equals_in_process(
     whose horizon is read ahead: the frame before the cut is measured by its own scene's warp,
     not by the next shot's (the lanes started the cut's frame before the frame before it was
     finished, and its vehicles were put 15-32 m by a warp they were not in)."""
-    import cv2
-
     from app.assembly import build_stages
     from app.pipeline import Pipeline
     from app.record import frame_record
     from app.sources import probe_video, read_frames
+    from tests.helpers import zoomed_replay
 
     info = probe_video(test_video)
     frames = list(read_frames(test_video, info, 0, 12))
-    # A zoomed replay of project_cut_1: its lower left 70 %, the horizon 120 rows higher.
     replay = data_dir / "videos" / "project_cut_1.mp4"
-    frames += [
-        np.ascontiguousarray(cv2.resize(f[216:720, 0:896], info.size))
-        for f in read_frames(replay, probe_video(replay), 0, 16)
-    ]
+    frames += [zoomed_replay(f) for f in read_frames(replay, probe_video(replay), 0, 16)]
 
     def records(in_worker: bool) -> list[dict[str, Any]]:
         lanes, vehicles = build_stages()
