@@ -103,7 +103,7 @@ class _Started:
     index: int = 0  # frames started before it since `prepare`
     cut: bool = False  # the first frame of another shot (see `camera_cal.shots`)
     roll_deg: float = 0.0  # the turn levelled away in this frame
-    # The lane stage's warp as of this frame (its metres; with the worker, the next frame is
+    # The warp of this frame's metres (`Pipeline._view`; with the worker, the next frame is
     # started before this one finishes, and at a cut its warp is another scene's).
     view: BirdsEye | None = None
 
@@ -459,7 +459,7 @@ class Pipeline:
                 index=index,
                 cut=cut,
                 roll_deg=self._roll,
-                view=self.lanes.current_view if self.lanes is not None else None,
+                view=self._view(placement),
             )
         if self._worker is not None:
             self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
@@ -484,7 +484,23 @@ class Pipeline:
             index=index,
             cut=cut,
             roll_deg=self._roll,
-            view=self.lanes.current_view if self.lanes is not None else None,
+            view=self._view(placement),
+        )
+
+    def _view(self, placement: dict[str, Any]) -> BirdsEye | None:
+        """The warp whose metres a frame started under `placement` is measured by: the lane
+        stage's as of it, or without the lane stage the default lane config's for the same
+        placement."""
+        if self.lanes is not None:
+            return self.lanes.current_view
+        assert self.size is not None
+        return _scene_warp(
+            tuple(self.size),
+            placement["horizon_y"],
+            placement["live"],
+            placement["scale_height"],
+            placement["vanishing_x"],
+            placement["ground_scale"],
         )
 
     def _read_roll(self, undistorted: Frame, detections: Detections, index: int) -> None:
@@ -558,20 +574,7 @@ class Pipeline:
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
             self._read_roll(undistorted, vehicles.detections, started.index)
         facts = None
-        # Metres follow the warp placed from the scene: the lane stage's, or without it the
-        # default lane config's for the same placement.
-        current = (
-            started.view
-            if self.lanes is not None
-            else _scene_warp(
-                (undistorted.shape[1], undistorted.shape[0]),
-                started.placement["horizon_y"],
-                started.placement["live"],
-                started.placement["scale_height"],
-                started.placement["vanishing_x"],
-                started.placement["ground_scale"],
-            )
-        )
+        current = started.view
         if (
             self._geometry is not None
             and current is not None
