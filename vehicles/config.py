@@ -204,11 +204,10 @@ class DetectorConfig:
         (`is_dark`) `dark_frames`, `grainy_dark_frames` where the grain reaches `very_grainy`,
         `grain_frames` where it reaches `dark_grain`; else `grain_frames` on a very grainy road
         (`very_grainy`), else 1."""
-        if self.is_dark(road_grey) and (grain is None or grain < self.dark_grain):
-            if grain is not None and grain >= self.very_grainy:
-                return self.grainy_dark_frames
-            return self.dark_frames
-        return self.grain_frames if grain is not None and grain >= self.very_grainy else 1
+        noise = 0.0 if grain is None else grain  # unknown: read as none
+        if self.is_dark(road_grey) and noise < self.dark_grain:
+            return self.grainy_dark_frames if noise >= self.very_grainy else self.dark_frames
+        return self.grain_frames if noise >= self.very_grainy else 1
 
     def chroma_sigma_at(self, grain: float | None, rows: float) -> float | None:
         """The Gaussian (px) that smooths the picture's colour on a road of this `grain` (from
