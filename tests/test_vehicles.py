@@ -1131,9 +1131,9 @@ def test_grainy_dark_footage_keeps_its_precision(data_dir: Path, tmp_path: Path)
     for at most 4 % of the cars, and no fewer cars nor more false boxes than the mean of 3
     (159 / 2 against 165 / 14 alone and 136 / 14 of 3; pooled over this and two other draws of
     the grain 455 / 21, against 434 / 31 as shipped before: 3 frames, and the dark verifier
-    mined so); checked on the dark road by the
-    dark verifier, which learned other dimmed copies of other clips, at most half the false
-    boxes of the verifier alone (161 / 19), and at most 3 % of the cars fewer."""
+    mined so); checked on the dark road by the dark verifier, which learned other dimmed
+    copies of other clips, at most half the false boxes of the verifier alone (161 / 19), and
+    at most 3 % of the cars fewer."""
     from app.mining import Dimming, dimmed_copy
 
     shipped = DetectorConfig().dark_frames
