@@ -233,16 +233,25 @@ class DetectorConfig:
     def at_rate(self, fps: float) -> DetectorConfig:
         """The same settings for video at `fps` frames a second: the heat history and the
         tracker's counts scaled to cover the same time (at least a frame; `recent` stays two
-        frames, one of each interleaved half of the bands)."""
+        frames, one of each interleaved half of the bands), and the tracker's weights to forget
+        as much a second (kept per frame, a box following a car that speeds across the picture
+        trailed it by twice as many frames' motion at half the rate)."""
         if fps <= 0 or fps == self.frame_rate:
             return self
 
         def frames(count: int) -> int:
             return max(1, round(count * fps / self.frame_rate))
 
+        def per_second(weight: float) -> float:
+            # What is left of the old estimate after a second, (1 - weight) ** fps, is kept:
+            # a car's place and motion across the picture change over seconds, not frames.
+            return 1.0 - float((1.0 - weight) ** (self.frame_rate / fps))
+
         heat = replace(self.heat, history=max(self.heat.recent, frames(self.heat.history)))
         track = replace(
             self.track,
+            smoothing=per_second(self.track.smoothing),
+            velocity_gain=per_second(self.track.velocity_gain),
             confirm_frames=frames(self.track.confirm_frames),
             max_missed=frames(self.track.max_missed),
             show_missed=frames(self.track.show_missed),
