@@ -108,7 +108,8 @@ class LaneFinder:
         """The bird's-eye warp for this frame size and scene (the config's horizon, the whole
         frame and its height when not given; the live centre's column for the vanishing point;
         the tuned camera's ground scale), kept while they stay the same (the app passes a scene
-        that moves in steps): a new warp starts the lines' history afresh."""
+        that moves in steps): a new warp starts the lines' history afresh, and the road's
+        motion from a new view (its advances so far stand)."""
         current = self._view
         if (
             current is not None
@@ -123,8 +124,9 @@ class LaneFinder:
         self._view = birdseye_for(
             frame_size, self.config, horizon_y, live, scale_height, vanishing_x, ground_scale
         )
-        if current is not None:
-            self.reset()
+        if current is not None:  # the lines start afresh; the car drives on as fast
+            self.left, self.right, _ = self._fresh_history()
+            self.motion.new_view()
         return self._view
 
     @property

@@ -118,12 +118,18 @@ class RoadMotion:
         self._background: NDArray[np.float32] | None = None  # running mean of the views
         self._views = 0  # views in the running mean
 
-    def reset(self) -> None:
-        """Forget the previous view and the recent advances."""
-        self.recent.clear()
+    def new_view(self) -> None:
+        """Forget the previous view and the running mean of the views, keeping the recent
+        advances: a new warp shows the road otherwise, but the car drives on as fast (the
+        advances are in metres)."""
         self._previous = None
         self._frames = 1
         self._background, self._views = None, 0
+
+    def reset(self) -> None:
+        """Forget the previous view and the recent advances."""
+        self.recent.clear()
+        self.new_view()
 
     def update(
         self,

@@ -18,7 +18,7 @@ from lanes.finder import LaneFinder
 from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.threshold import lane_mask
-from tests.helpers import process_clip
+from tests.helpers import moving_road, process_clip
 from vehicles.detections import Detections
 
 DASH_PERIOD_M = 12.19  # US highways: a 10 ft dash and a 30 ft gap
@@ -217,6 +217,22 @@ def test_a_glared_windscreen_does_not_read_the_road_as_standing(
     rows = process_clip(video, tmp_path, "--calibration", "none", "--no-vehicles", "--end", "4")
     speeds = np.array([r["speed_kmh"] for r in rows[round(info.fps) : len(frames)]], float)
     assert np.all(np.abs(speeds / np.median(speeds) - 1) <= 0.1), speeds
+
+
+def test_a_new_warp_keeps_the_speed() -> None:
+    """The scene moves in steps (a horizon read again, a bonnet found): each new warp starts the
+    lane lines afresh and reads the road's motion from a new view, but the car drives on as
+    fast. LA's speed had read none, then 1-4 km/h for 5 frames (the new view's first shifts,
+    read before its running mean was in), where its bonnet was found at 4 s."""
+    finder = LaneFinder()
+    advances = []
+    for k, frame in enumerate(moving_road((640, 360), 30)):
+        live = (0, 0, 640, 360) if k < 20 else (0, 0, 640, 340)  # a bonnet from frame 20
+        advances.append(finder.process(frame, 120.0, live).advance_m)
+    assert advances[19] is not None and advances[19] > 0.1
+    assert finder.current_view is not None and finder.current_view.live == (0, 0, 640, 340)
+    before = advances[19]
+    assert all(a is not None and abs(a / before - 1) < 0.1 for a in advances[20:]), advances
 
 
 def test_road_motion_reads_no_speed_off_a_road_without_texture() -> None:
