@@ -202,7 +202,7 @@ def test_a_glared_windscreen_does_not_read_the_road_as_standing(
     wild_dir: Path, tmp_path: Path
 ) -> None:
     """The LA clip's windscreen reflects changing light, which pulled the shift of 7 in 20
-    frames in places to none: its speed swung between 17 and 92 km/h where its lane's dashes
+    frames in places to none: its speed swung between 17 and 91 km/h where its lane's dashes
     pass at a steady rate (each 14.5-17 frames after the last, measured here off the pixels
     where they cross row 370). Leaving the shifts pulled short out, it stays within 10 % of its
     median from 1 s to 4 s (92-102 km/h)."""

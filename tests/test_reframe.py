@@ -180,7 +180,7 @@ def test_an_oncoming_car_at_half_the_frame_rate_is_boxed_where_it_is(
 ) -> None:
     """project_cut_1 at 12.5 fps: the oncoming car (label 13) crosses 40-60 px a frame, and each
     box on it is where the labels have it (IoU >= 0.5: 0.51-0.71 in 7 frames), and no box is
-    false. Before the tracker's velocity forgot as much a second at any rate, its box trailed it
+    false. Before the tracker's weights forgot as much a second at any rate, its box trailed it
     by 12-23 px (IoU 0.40-0.47: 3 false boxes, the half-rate row's precision 0.965)."""
     video = data_dir / "videos" / "project_cut_1.mp4"
     labels = data_dir / "labels" / "project_cut_1.json"
