@@ -80,14 +80,14 @@ class LaneFinder:
         self.left, self.right, self.motion = self._fresh_history()
         self._view: BirdsEye | None = None
 
+    def _fresh_lines(self) -> tuple[Line, Line]:
+        """Empty left and right lines whose history covers the config's time at `fps`."""
+        timed = self.config.at_rate(self.fps)
+        return Line(timed.history, timed.max_misses), Line(timed.history, timed.max_misses)
+
     def _fresh_history(self) -> tuple[Line, Line, RoadMotion]:
         """Empty lines and road motion whose lengths cover the config's time at `fps`."""
-        timed = self.config.at_rate(self.fps)
-        return (
-            Line(timed.history, timed.max_misses),
-            Line(timed.history, timed.max_misses),
-            RoadMotion(timed.motion_smoothing),
-        )
+        return *self._fresh_lines(), RoadMotion(self.config.at_rate(self.fps).motion_smoothing)
 
     def reset(self, fps: float | None = None) -> None:
         """Forget both lines' history and the road's motion; with `fps`, frames now come at
@@ -125,7 +125,7 @@ class LaneFinder:
             frame_size, self.config, horizon_y, live, scale_height, vanishing_x, ground_scale
         )
         if current is not None:  # the lines start afresh; the car drives on as fast
-            self.left, self.right, _ = self._fresh_history()
+            self.left, self.right = self._fresh_lines()
             self.motion.new_view()
         return self._view
 
