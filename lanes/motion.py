@@ -126,11 +126,6 @@ class RoadMotion:
         self._frames = 1
         self._background, self._views = None, 0
 
-    def reset(self) -> None:
-        """Forget the previous view and the recent advances."""
-        self.recent.clear()
-        self.new_view()
-
     def update(
         self,
         birdseye_rgb: NDArray[np.uint8],
