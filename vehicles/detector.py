@@ -446,7 +446,7 @@ class VehicleDetector:
         regions = Detections.from_boxes(region_boxes[big], scores)
         # Tracks may reach past the live picture's side (a car leaving); what is shown stays in it.
         picture = (float(lx0), float(ly0), float(lx1), float(ly1))
-        shown = self.tracker.update(regions, picture).clipped(picture)
+        shown = self.tracker.update(regions, picture, view.horizon_y).clipped(picture)
         # A car leaving at the side coasts out with its outer edge held at the picture's edge
         # (its boxes were cut there): once its box is thinner than any found, it has left.
         shown = shown.subset(smaller_sides(shown.boxes) >= smallest)

@@ -20,7 +20,8 @@ from vehicles.detections import Detections, inside_share, iou_matrix
 @dataclass
 class Track:
     """One tracked vehicle: box and per-frame velocity of its edges (x1, y1, x2, y2); `id` is 0
-    until the track is first shown."""
+    until the track is first shown; `cut`: which edges its last box had at the picture's edge
+    (the vehicle reaches past them, so they were not seen)."""
 
     box: NDArray[np.float64]
     score: float
@@ -28,6 +29,7 @@ class Track:
     hits: int = 1
     missed: int = 0
     id: int = 0
+    cut: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(4, bool))
 
     def predicted(self) -> NDArray[np.float64]:
         """The box expected in the next frame."""
@@ -55,7 +57,10 @@ class Tracker:
         return np.array([by_id[i] for i in ids.tolist()], np.float64).reshape(-1, 4)
 
     def update(
-        self, detections: Detections, region: tuple[float, float, float, float] | None = None
+        self,
+        detections: Detections,
+        region: tuple[float, float, float, float] | None = None,
+        horizon_y: float | None = None,
     ) -> Detections:
         """Fold in one frame's detections; return the confirmed, shown tracks.
 
@@ -64,6 +69,10 @@ class Tracker:
         Ids count shown vehicles only (1, 2, 3, ...): a candidate never confirmed uses none. With
         `region` (the frame or its live picture, x0, y0, x1, y1), a track whose predicted box has
         left it (less than `min_inside` of it inside) is dropped at once instead of lingering.
+        With `horizon_y`, a receding track's velocity slows between frames as a vehicle's on a
+        flat road does (`road_velocity`). An edge that was cut by `region`'s edge (`cut_edges`) and
+        is seen now is placed where it is seen, at the opposite edge's velocity: its jump out of
+        the picture's edge is where the vehicle's side is, not its motion.
         """
         cfg = self.config
         boxes = detections.boxes
@@ -74,17 +83,27 @@ class Tracker:
             rows, cols = linear_sum_assignment(-iou)
             matched = {r: c for r, c in zip(rows, cols, strict=True) if iou[r, c] >= cfg.match_iou}
         a, b = cfg.smoothing, cfg.velocity_gain
+        cut = cut_edges(boxes, region)
         for r, track in enumerate(self.tracks):
+            onward = track.velocity
+            if horizon_y is not None:
+                onward = road_velocity(track.box, track.velocity, horizon_y)
             if r in matched:
                 c = matched[r]
-                innovation = boxes[c] + self.lag * track.velocity - predicted[r]
+                measured = boxes[c] + self.lag * track.velocity
+                innovation = measured - predicted[r]
                 track.box = predicted[r] + a * innovation
-                track.velocity = track.velocity + b * innovation
+                track.velocity = onward + b * innovation
+                appeared = track.cut & ~cut[c]
+                track.box[appeared] = measured[appeared]
+                track.velocity[appeared] = track.velocity[_OPPOSITE][appeared]
+                track.cut = cut[c]
                 track.score = a * float(detections.scores[c]) + (1 - a) * track.score
                 track.hits += 1
                 track.missed = 0
             else:
-                track.box = predicted[r]  # coast on the last velocity
+                track.box = predicted[r]  # coast on
+                track.velocity = onward
                 track.missed += 1
         keep = [t.missed <= cfg.max_missed for t in self.tracks]
         if region is not None and self.tracks:
@@ -92,7 +111,7 @@ class Tracker:
             keep = [k and s >= cfg.min_inside for k, s in zip(keep, share, strict=True)]
         self.tracks = [t for t, k in zip(self.tracks, keep, strict=True) if k]
         for c in sorted(set(range(len(boxes))) - set(matched.values())):
-            self.tracks.append(Track(boxes[c].copy(), float(detections.scores[c])))
+            self.tracks.append(Track(boxes[c].copy(), float(detections.scores[c]), cut=cut[c]))
         shown = [
             t for t in self.tracks if t.hits >= cfg.confirm_frames and t.missed <= cfg.show_missed
         ]
@@ -105,3 +124,52 @@ class Tracker:
             np.array([t.score for t in shown]),
             np.array([t.id for t in shown], dtype=np.int64),
         )
+
+
+_OPPOSITE = np.array([2, 3, 0, 1])  # x1 <-> x2, y1 <-> y2
+
+
+def cut_edges(
+    boxes: NDArray[np.float64],
+    region: tuple[float, float, float, float] | None,
+    margin: float = 1.0,
+) -> NDArray[np.bool_]:
+    """Which edges (x1, y1, x2, y2) of each box lie on `region`'s edge (within `margin` px): a
+    vehicle cut there reaches past it, so the box's edge is not the vehicle's."""
+    if region is None:
+        return np.zeros(boxes.shape, bool)
+    x0, y0, x1, y1 = region
+    return np.column_stack(
+        [
+            boxes[:, 0] <= x0 + margin,
+            boxes[:, 1] <= y0 + margin,
+            boxes[:, 2] >= x1 - margin,
+            boxes[:, 3] >= y1 - margin,
+        ]
+    ).reshape(-1, 4)
+
+
+def road_velocity(
+    box: NDArray[np.float64],
+    velocity: NDArray[np.float64],
+    horizon_y: float,
+    least_offset: float = 4.0,
+    largest_step: float = 1.5,
+) -> NDArray[np.float64]:
+    """The velocity of a receding vehicle's box in the next frame, once it moved on by `velocity`.
+
+    On a flat road a box's size and its edges' offsets from the vanishing point go as one over
+    the vehicle's distance, and at a steady speed each edge's velocity as its offset squared:
+    over a frame in which the distance grew by k (the bottom's offset from `horizon_y` before
+    over after), the velocity shrinks by k squared, so a receding vehicle's box slows towards the
+    vanishing point instead of running past it. A nearing vehicle's is left as it is: its box
+    also grows as heat gathers on it, and speeding it up by that growth ran boxes ahead of
+    oncoming cars. A bottom within `least_offset` px of the horizon tells no distance, and k is
+    held within `largest_step`.
+    """
+    before = box[3] - horizon_y
+    after = before + velocity[3]
+    if before < least_offset or after < least_offset or after >= before:
+        return velocity
+    shrink = max(after / before, 1 / largest_step)
+    return velocity * shrink * shrink
