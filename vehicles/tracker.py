@@ -167,8 +167,8 @@ def road_velocity(
     oncoming cars. A bottom within `least_offset` px of the horizon tells no distance, and k is
     held within `largest_step`.
     """
-    before = box[3] - horizon_y
-    after = before + velocity[3]
+    before = float(box[3]) - horizon_y
+    after = before + float(velocity[3])
     if before < least_offset or after < least_offset or after >= before:
         return velocity
     shrink = max(after / before, 1 / largest_step)
