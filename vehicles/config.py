@@ -81,6 +81,9 @@ class TrackConfig:
     confirm_frames: int = 4  # a track is shown once seen in this many frames
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames
+    # A box's side leaving the picture's edge is a vehicle coming in if its motion brought it
+    # that far within this many frames (more: heat falling short of a vehicle still cut).
+    entering_frames: int = 6
 
 
 @dataclass(frozen=True)
@@ -255,6 +258,7 @@ class DetectorConfig:
             confirm_frames=frames(self.track.confirm_frames),
             max_missed=frames(self.track.max_missed),
             show_missed=frames(self.track.show_missed),
+            entering_frames=frames(self.track.entering_frames),
         )
         return replace(
             self,

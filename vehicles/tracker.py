@@ -71,8 +71,9 @@ class Tracker:
         left it (less than `min_inside` of it inside) is dropped at once instead of lingering.
         With `horizon_y`, a receding track's velocity slows between frames as a vehicle's on a
         flat road does (`road_velocity`). An edge that was cut by `region`'s edge (`cut_edges`) and
-        is seen now is placed where it is seen, at the opposite edge's velocity: its jump out of
-        the picture's edge is where the vehicle's side is, not its motion.
+        is seen now, as a vehicle comes into the picture (`entering_sides`), is placed where it
+        is seen, at the opposite edge's velocity: its jump out of the picture's edge is where the
+        vehicle's side is, not its motion.
         """
         cfg = self.config
         boxes = detections.boxes
@@ -94,9 +95,11 @@ class Tracker:
                 innovation = measured - predicted[r]
                 track.box = predicted[r] + a * innovation
                 track.velocity = onward + b * innovation
-                appeared = track.cut & ~cut[c]
-                track.box[appeared] = measured[appeared]
-                track.velocity[appeared] = track.velocity[_OPPOSITE][appeared]
+                entering = entering_sides(
+                    track.cut & ~cut[c], innovation, track.velocity, cfg.entering_frames
+                )
+                track.box[entering] = measured[entering]
+                track.velocity[entering] = track.velocity[_OPPOSITE][entering]
                 track.cut = cut[c]
                 track.score = a * float(detections.scores[c]) + (1 - a) * track.score
                 track.hits += 1
@@ -127,6 +130,7 @@ class Tracker:
 
 
 _OPPOSITE = np.array([2, 3, 0, 1])  # x1 <-> x2, y1 <-> y2
+_INWARD = np.array([1.0, 1.0, -1.0, -1.0])  # away from each edge's side of the picture
 
 
 def cut_edges(
@@ -147,6 +151,21 @@ def cut_edges(
             boxes[:, 3] >= y1 - margin,
         ]
     ).reshape(-1, 4)
+
+
+def entering_sides(
+    appeared: NDArray[np.bool_],
+    jump: NDArray[np.float64],
+    velocity: NDArray[np.float64],
+    frames: float,
+) -> NDArray[np.bool_]:
+    """Which edges that `appeared` from the picture's edge (x1, y1, x2, y2) are a vehicle's side
+    coming into the picture: its opposite edge moves away from that side (`velocity`), fast
+    enough to have brought the side in within `frames` frames (the edge's `jump` from where it
+    was predicted). A jump that its motion cannot explain is the heat falling short of a
+    vehicle still cut by the edge."""
+    inward = velocity[_OPPOSITE] * _INWARD
+    return np.asarray(appeared & (inward > 0) & (np.abs(jump) <= frames * inward))
 
 
 def road_velocity(
