@@ -1215,7 +1215,7 @@ def test_a_receding_car_s_box_slows_towards_the_vanishing_point() -> None:
             shown = tracker.update(Detections.from_boxes(seen, np.ones(len(seen))), None, horizon_y)
             if frame >= 4:
                 assert len(shown) == 1, frame
-                overlaps.append(iou(shown.boxes[0], _receding_box(frame)))
+                overlaps.append(iou(shown.boxes[0], _receding_box(frame).tolist()))
         return overlaps
 
     told, untold = fits(400.0), fits(None)
