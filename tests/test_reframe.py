@@ -175,6 +175,27 @@ def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
         assert row["lane_within_20px"] >= LANE_WITHIN, (name, row)
 
 
+def _oncoming_car_fits(
+    data_dir: Path, tmp_path: Path, framing: Framing
+) -> tuple[list[float], dict[str, Any]]:
+    """project_cut_1 so framed: the IoU of each box over its oncoming car (label 13) with the
+    car's label, moved as the framing moves it, and the clip's scores."""
+    video = data_dir / "videos" / "project_cut_1.mp4"
+    labels = data_dir / "labels" / "project_cut_1.json"
+    info = probe_video(video)
+    calibration = load_calibration(default_calibration_path())
+    scores = framing_scores(video, labels, framing, tmp_path, calibration)
+    document = reframe_labels(json.loads(labels.read_text()), framing, info.size)
+    truth = retime_labels(load_labels_document(document), framing, info.n_frames)
+    fits: list[float] = []
+    for record in scores["frames"]:
+        shown = truth.get(int(record["frame"]), FrameLabels((), {})).vehicles
+        for car in (v.box for v in shown if v.id == 13):
+            overlaps = [iou(v["box"], car) for v in record.get("vehicles") or []]
+            fits.extend(o for o in overlaps if o > 0.1)
+    return fits, scores
+
+
 def test_an_oncoming_car_at_half_the_frame_rate_is_boxed_where_it_is(
     data_dir: Path, tmp_path: Path
 ) -> None:
@@ -182,20 +203,9 @@ def test_an_oncoming_car_at_half_the_frame_rate_is_boxed_where_it_is(
     box on it is where the labels have it (IoU >= 0.5: 0.51-0.71 in 7 frames), and no box is
     false. Before the tracker's weights forgot as much a second at any rate, its box trailed it
     by 12-23 px (IoU 0.40-0.47: 3 false boxes, the half-rate row's precision 0.965)."""
-    video = data_dir / "videos" / "project_cut_1.mp4"
-    labels = data_dir / "labels" / "project_cut_1.json"
-    info = probe_video(video)
-    (half,) = (f for f in standard_framings(info.size) if f.rate == 0.5)
-    calibration = load_calibration(default_calibration_path())
-    scores = framing_scores(video, labels, half, tmp_path, calibration)
-    document = reframe_labels(json.loads(labels.read_text()), half, info.size)
-    truth = retime_labels(load_labels_document(document), half, info.n_frames)
-    fits: list[float] = []  # the IoU of each box over the car with the car's label
-    for record in scores["frames"]:
-        shown = truth.get(int(record["frame"]), FrameLabels((), {})).vehicles
-        for car in (v.box for v in shown if v.id == 13):
-            overlaps = [iou(v["box"], car) for v in record.get("vehicles") or []]
-            fits.extend(o for o in overlaps if o > 0.1)
+    size = probe_video(data_dir / "videos" / "project_cut_1.mp4").size
+    (half,) = (f for f in standard_framings(size) if f.rate == 0.5)
+    fits, scores = _oncoming_car_fits(data_dir, tmp_path, half)
     assert len(fits) >= 3 and min(fits) >= 0.5, fits
     assert scores["vehicles"]["iou_0.5"]["false_positives"] == 0, scores["vehicles"]
 
@@ -209,22 +219,9 @@ def test_a_receding_car_seen_by_a_rear_camera_is_boxed_where_it_is(
     a receding track slowed between frames and the car's side, seen leaving the picture's edge,
     was taken for speed, its box ran up to 40 px ahead of it (IoU down to 0.14; 6 false
     boxes)."""
-    video = data_dir / "videos" / "project_cut_1.mp4"
-    labels = data_dir / "labels" / "project_cut_1.json"
-    info = probe_video(video)
     told = REAR_FRAMINGS[1]
     assert told.facing == "rear"
-    scores = framing_scores(
-        video, labels, told, tmp_path, load_calibration(default_calibration_path())
-    )
-    document = reframe_labels(json.loads(labels.read_text()), told, info.size)
-    truth = retime_labels(load_labels_document(document), told, info.n_frames)
-    fits: list[float] = []  # the IoU of each box over the car with the car's label
-    for record in scores["frames"]:
-        shown = truth.get(int(record["frame"]), FrameLabels((), {})).vehicles
-        for car in (v.box for v in shown if v.id == 13):
-            overlaps = [iou(v["box"], car) for v in record.get("vehicles") or []]
-            fits.extend(o for o in overlaps if o > 0.1)
+    fits, scores = _oncoming_car_fits(data_dir, tmp_path, told)
     assert sum(f >= 0.5 for f in fits) >= 8 and min(fits) >= 0.45, fits
     assert scores["vehicles"]["iou_0.5"]["false_positives"] <= 1, scores["vehicles"]
 
