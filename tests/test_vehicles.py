@@ -18,7 +18,7 @@ from app.traffic import mirrored_detections
 from camera_cal import build_undistorter, default_calibration_path, load_calibration
 from tests.helpers import process_clip, raised_camera
 from vehicles.config import Band, DetectorConfig, HeatConfig, TrackConfig
-from vehicles.detections import Detections
+from vehicles.detections import Detections, cut_edges
 from vehicles.detector import (
     Scorer,
     VehicleDetector,
@@ -46,7 +46,7 @@ from vehicles.search import (
     score_windows_at,
     search_band,
 )
-from vehicles.tracker import Tracker, cut_edges, entering_sides, road_velocity
+from vehicles.tracker import Tracker, entering_sides, road_velocity
 
 
 def plain_heat(**settings: Any) -> HeatConfig:

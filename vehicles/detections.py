@@ -81,6 +81,26 @@ def inside_share(
     return np.asarray(_intersection(boxes, frame)[:, 0] / np.maximum(_area(boxes), 1e-9))
 
 
+def cut_edges(
+    boxes: NDArray[np.float64],
+    region: tuple[float, float, float, float] | None,
+    margin: float = 1.0,
+) -> NDArray[np.bool_]:
+    """Which edges (x1, y1, x2, y2) of each box lie on `region`'s edge (within `margin` px): a
+    vehicle cut there reaches past it, so the box's edge is not the vehicle's."""
+    if region is None:
+        return np.zeros(boxes.shape, bool)
+    x0, y0, x1, y1 = region
+    return np.column_stack(
+        [
+            boxes[:, 0] <= x0 + margin,
+            boxes[:, 1] <= y0 + margin,
+            boxes[:, 2] >= x1 - margin,
+            boxes[:, 3] >= y1 - margin,
+        ]
+    ).reshape(-1, 4)
+
+
 def covered_share(
     boxes: NDArray[np.float64], hidden: tuple[tuple[int, int, int, int], ...]
 ) -> NDArray[np.float64]:

@@ -15,6 +15,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from vehicles.detections import cut_edges
+
 
 def snap_bottoms(
     frame: NDArray[np.uint8],
@@ -53,10 +55,10 @@ def snap_tops(
     live picture's side (its middle is not the car's), or under `min_height` pixels tall (a few
     rows of a far car's roof and window blur into one edge) keeps its top."""
     out = np.array(boxes, np.float64, copy=True).reshape(-1, 4)
-    lx0, _, lx1, _ = live
-    for box in out:
-        x0, y0, x1, y1 = box
-        if y1 - y0 < min_height or x0 <= lx0 + 1 or x1 >= lx1 - 1:
+    at_side = np.asarray(cut_edges(out, live)[:, [0, 2]].any(axis=1))
+    for box, cut in zip(out, at_side, strict=True):
+        _, y0, _, y1 = box
+        if y1 - y0 < min_height or cut:
             continue
         found = _strongest_row(frame, box, y0, reach, margin, live, signed=False)
         if found is not None and found[1] >= min_change:
@@ -120,7 +122,7 @@ def reach_toward(
     x0, x1 = out[:, 0].copy(), out[:, 2].copy()
     moves = np.zeros(len(out)) if motion is None else np.asarray(motion, np.float64)
     quick = np.abs(moves) > fast * (x1 - x0)
-    inside = (x0 > live[0] + tolerance) & (x1 < live[2] - tolerance)
+    inside = ~cut_edges(out, live, tolerance)[:, [0, 2]].any(axis=1)
     reach = np.where(quick, lead * np.abs(moves), share * (x1 - x0))
     # Towards the column, not past it; or the way a quick box moves.
     left = inside & np.where(quick, moves < 0, x0 >= column)

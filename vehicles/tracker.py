@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from vehicles.assignment import linear_sum_assignment
 from vehicles.config import TrackConfig
-from vehicles.detections import Detections, inside_share, iou_matrix
+from vehicles.detections import Detections, cut_edges, inside_share, iou_matrix
 
 
 @dataclass
@@ -131,26 +131,6 @@ class Tracker:
 
 _OPPOSITE = np.array([2, 3, 0, 1])  # x1 <-> x2, y1 <-> y2
 _INWARD = np.array([1.0, 1.0, -1.0, -1.0])  # away from each edge's side of the picture
-
-
-def cut_edges(
-    boxes: NDArray[np.float64],
-    region: tuple[float, float, float, float] | None,
-    margin: float = 1.0,
-) -> NDArray[np.bool_]:
-    """Which edges (x1, y1, x2, y2) of each box lie on `region`'s edge (within `margin` px): a
-    vehicle cut there reaches past it, so the box's edge is not the vehicle's."""
-    if region is None:
-        return np.zeros(boxes.shape, bool)
-    x0, y0, x1, y1 = region
-    return np.column_stack(
-        [
-            boxes[:, 0] <= x0 + margin,
-            boxes[:, 1] <= y0 + margin,
-            boxes[:, 2] >= x1 - margin,
-            boxes[:, 3] >= y1 - margin,
-        ]
-    ).reshape(-1, 4)
 
 
 def entering_sides(
