@@ -89,6 +89,28 @@ def test_dense_scores_equal_window_by_window(model: VehicleModel, data_dir: Path
         assert hits.decisions[k] == pytest.approx(one, abs=1e-4)
 
 
+def test_the_verifier_reads_only_the_windows_that_could_heat(
+    model: VehicleModel, data_dir: Path
+) -> None:
+    """A band's verifier and mirror-image scores are taken at the windows whose own decision
+    reaches `heats_from` alone, and there they are what scoring the whole band gives."""
+    frame = _rgb(data_dir / "test_images" / "test1.jpg")
+    band = Band(window=96 / 720, top=390 / 720, bottom=540 / 720, left=0.5, right=1.0)
+    view = View((1280, 720), 420.8, (0, 0, 1280, 720), 720.0)
+    weights, verifier = LinearWeights.from_model(model), load_model(default_verifier_path())
+    checks = LinearWeights.from_model(verifier), weights.mirrored()
+    every = search_band(frame, band, weights, view, 420.8 / 720, *checks, heats_from=-np.inf)
+    least = model.decision_at(0.5)
+    hits = search_band(frame, band, weights, view, 420.8 / 720, *checks, heats_from=least)
+    assert every is not None and hits is not None
+    due = hits.decisions >= least
+    assert 0 < due.sum() < len(due) / 4  # test1's two cars; most of the band is road
+    for part in ("verified", "mirrored"):
+        some, all_of = getattr(hits, part), getattr(every, part)
+        assert not np.isnan(all_of).any() and np.isnan(some[~due]).all()
+        np.testing.assert_allclose(some[due], all_of[due], atol=1e-4)
+
+
 def test_mirrored_weights_score_each_windows_mirror_image(
     model: VehicleModel, data_dir: Path
 ) -> None:

@@ -352,9 +352,9 @@ class VehicleDetector:
         self, hits: Sequence[BandHits], view: View, dark: bool = False
     ) -> tuple[NDArray[np.float64], ...]:
         """For every window of `hits`, in order: P(vehicle) by its band's model, its verifier's
-        P(vehicle) (1 where that model has none), the weight of its heat, and the model's
-        P(vehicle) of its mirror image (1 where not scored). A window steps one
-        cell: a 4-cell model's windows step a quarter of their side, the 8-cell model's an
+        P(vehicle) (1 where that model has none or did not read the window), the weight of its
+        heat, and the model's P(vehicle) of its mirror image (1 where not scored). A window steps
+        one cell: a 4-cell model's windows step a quarter of their side, the 8-cell model's an
         eighth, so fewer of them overlap a small car: each of its hits heats 8 / 4 = 2 times as
         much (the square, 4, spoilt the boxes of 34-40 px cars; tried)."""
         cells = self.model.config.cells_per_patch
@@ -366,7 +366,9 @@ class VehicleDetector:
             checked = (
                 np.ones(n)
                 if scorer.verifier is None or hit.verified is None
-                else scorer.verifier.probability(hit.verified)
+                else np.where(
+                    np.isnan(hit.verified), 1.0, scorer.verifier.probability(hit.verified)
+                )
             )
             mirror = (
                 np.ones(n)

@@ -116,6 +116,21 @@ def score_windows_at(
     return np.asarray(score + weights.bias, np.float64)
 
 
+def _scored_at(
+    maps: FeatureMaps,
+    weights: LinearWeights,
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    due: NDArray[np.intp],
+) -> NDArray[np.float64]:
+    """Decision values by `weights` of the windows `due` among those at (`rows`, `cols`), NaN
+    at the others."""
+    scores = np.full(len(rows), np.nan)
+    if len(due):
+        scores[due] = score_windows_at(maps, weights, rows[due], cols[due])
+    return scores
+
+
 @dataclass(frozen=True, eq=False)
 class BandHits:
     """Every window of one band: boxes in frame pixels and decision values."""
@@ -124,9 +139,10 @@ class BandHits:
     window_px: float
     boxes: NDArray[np.float64]  # (n, 4)
     decisions: NDArray[np.float64]  # (n,)
-    verified: NDArray[np.float64] | None = None  # (n,) the verifier's decisions, when one is used
-    # (n,) the model's decisions of each window's mirror image where its own decision reached
-    # the search's `mirror_from`, NaN elsewhere; None: not scored
+    # (n,) the verifier's decisions where the model's own decision reached the search's
+    # `heats_from`, NaN elsewhere; None: no verifier
+    verified: NDArray[np.float64] | None = None
+    # (n,) the model's decisions of each window's mirror image, likewise; None: not scored
     mirrored: NDArray[np.float64] | None = None
 
 
@@ -180,13 +196,13 @@ def search_band(
     reference_horizon: float,
     verifier: LinearWeights | None = None,
     mirrored: LinearWeights | None = None,
-    mirror_from: float = 0.0,
+    heats_from: float = 0.0,
 ) -> BandHits | None:
-    """Score every window of one band (HOG computed once for the band at its scale), by
-    `weights` and, when given, by the `verifier` on the same features, and by the `mirrored`
-    weights (`LinearWeights.mirrored`) the windows whose decision reaches `mirror_from` (a few:
-    the rest could not heat anyway); None when the band does not fit in the live picture or its
-    windows would be smaller than its `min_window_px`."""
+    """Score every window of one band (HOG computed once for the band at its scale) by
+    `weights`, and the windows whose decision reaches `heats_from` (a few: the rest could not
+    heat anyway) also by the `verifier` on the same features and by the `mirrored` weights
+    (`LinearWeights.mirrored`), when given; None when the band does not fit in the live picture
+    or its windows would be smaller than its `min_window_px`."""
     cfg = weights.config
     x0, y0, x1, y1, scale = band_geometry(band, view, cfg.patch_size, reference_horizon)
     window = scale * cfg.patch_size
@@ -209,14 +225,14 @@ def search_band(
     maps = feature_maps(scaled, cfg)
     step = band.step_cells
     decision = score_windows(maps, weights)[::step, ::step]
-    verified = None if verifier is None else score_windows(maps, verifier)[::step, ::step].ravel()
     cy, cx = np.mgrid[0 : decision.shape[0], 0 : decision.shape[1]] * step
-    flipped = None
-    if mirrored is not None:
-        flipped = np.full(decision.size, np.nan)
-        due = np.flatnonzero(decision.ravel() >= mirror_from)
-        if len(due):
-            flipped[due] = score_windows_at(maps, mirrored, cy.ravel()[due], cx.ravel()[due])
+    due = np.flatnonzero(decision.ravel() >= heats_from)
+    # The verifier and the mirror image read the few windows that could heat, not the band:
+    # scoring the band again cost as much as the model's own score (2 ms a frame at 720p).
+    verified, flipped = (
+        None if extra is None else _scored_at(maps, extra, cy.ravel(), cx.ravel(), due)
+        for extra in (verifier, mirrored)
+    )
     # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
     sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
     px, py = cx.ravel() * cfg.pixels_per_cell, cy.ravel() * cfg.pixels_per_cell
