@@ -178,12 +178,12 @@ class LaneFinder:
         ]
         enough = [len(p) >= view.pixels_for(cfg.min_line_paint_m2) for p in pixels]
         fits: list[Fit | None]
+        bend = self._max_bend(view)
         if all(enough):
-            fits = list(
-                fit_lane(pixels[0], pixels[1], bh, cfg.outlier_m / view.xm_per_px, self._prior(bh))
-            )
+            outlier = cfg.outlier_m / view.xm_per_px
+            fits = list(fit_lane(pixels[0], pixels[1], bh, outlier, self._prior(bh), bend))
         else:
-            fits = [fit_line(p) if ok else None for p, ok in zip(pixels, enough, strict=True)]
+            fits = [fit_line(p, bend) if ok else None for p, ok in zip(pixels, enough, strict=True)]
         sample = self._width_sample(fits, paint.mask, view)
         status = self._check_and_update(fits, pixels, view)
         inside = self._line_inside(paint, view)
@@ -260,7 +260,8 @@ class LaneFinder:
         apart_m = (view.camera_x - float(evaluate_fit(curve, bh))) * view.xm_per_px
         if abs(apart_m) < cfg.astride_m:
             return None
-        fit = fit_line(prior_search(paint, curve, max(1, int(cfg.prior_margin_m / view.xm_per_px))))
+        margin = max(1, int(cfg.prior_margin_m / view.xm_per_px))
+        fit = fit_line(prior_search(paint, curve, margin), self._max_bend(view))
         if fit is None:
             return None
         side = "right" if apart_m < 0 else "left"  # the camera left of the line: our right side
@@ -268,6 +269,21 @@ class LaneFinder:
         beyond.reset()
         beyond.accept(fit)
         return f"{side}: the line inside the lane, {share:.2f} of its {width_m:.1f} m"
+
+    def _max_bend(self, view: BirdsEye) -> float:
+        """The largest y^2 term of a line's fit in `view`'s pixels that a road bends by at our
+        speed (the road's motion; `max_sideways_mps2`), inf while the speed is unknown or so
+        low that `min_radius_m` bounds the bend: x = a y^2 bends by 1 / (2 a) metres once both
+        axes are in metres."""
+        cfg = self.config
+        advance = self.motion.advance
+        if advance is None:
+            return np.inf
+        speed = abs(advance) * cfg.at_rate(self.fps).frame_rate
+        radius = speed**2 / cfg.max_sideways_mps2
+        if radius <= cfg.min_radius_m:
+            return np.inf
+        return view.ym_per_px**2 / (2 * view.xm_per_px * radius)
 
     def _prior(self, rows: int) -> LanePrior | None:
         """Heading and near width of the smoothed lane, if both lines have history."""

@@ -39,12 +39,18 @@ class Paint:
         return cls(mask, ys, xs)
 
 
-def fit_line(pixels: LinePixels) -> Fit | None:
-    """Second-order fit x(y); near rows weigh more since they are sharper. None if too few."""
+def fit_line(pixels: LinePixels, max_bend: float = np.inf) -> Fit | None:
+    """Second-order fit x(y); near rows weigh more since they are sharper. Its y^2 term is at
+    most `max_bend` in size (beyond it, refitted with the term at that bound: the tightest
+    bend believed). None if too few."""
     if len(pixels) < 3 or np.ptp(pixels.y) < 10:
         return None
     weights = 0.5 + pixels.y / max(float(pixels.y.max()), 1.0)
-    return np.polyfit(pixels.y, pixels.x, 2, w=weights)
+    fit = np.polyfit(pixels.y, pixels.x, 2, w=weights)
+    if abs(fit[0]) <= max_bend:
+        return fit
+    bend = float(np.copysign(max_bend, fit[0]))
+    return np.array([bend, *np.polyfit(pixels.y, pixels.x - bend * pixels.y**2, 1, w=weights)])
 
 
 def evaluate_fit(fit: Fit, y: NDArray[Any] | float) -> NDArray[np.float64]:
@@ -139,6 +145,7 @@ def fit_lane(
     rows: float,
     outlier_px: float,
     prior: LanePrior | None = None,
+    max_bend: float = np.inf,
 ) -> tuple[Fit, Fit]:
     """Fit both lines at once: shared curvature and heading, own position, a linear width change.
 
@@ -146,6 +153,8 @@ def fit_lane(
     Lane lines are parallel on the road, so a solid line steadies the fit of a dashed one. Each
     side weighs the same in total (near rows more), and one pass drops outlying pixels. A prior
     adds two weak pseudo-observations, so a dash gap near the camera cannot swing the near end.
+    A fit bending more than `max_bend` (|a|) is refitted with a at that bound: the tightest bend
+    believed, the lines' other terms fitted to it.
     """
     ys = np.concatenate([left.y, right.y])
     xs = np.concatenate([left.x, right.x])
@@ -160,17 +169,28 @@ def fit_lane(
         prior_rows = np.array([[2 * rows**2, rows, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0, rows]])
         prior_targets = np.array([rows * prior.heading, prior.near_width])
         prior_sw = np.sqrt([prior.heading_weight, prior.near_width_weight])
-    keep = np.ones(len(ys), bool)
-    params = np.zeros(5)
-    for _ in range(2):
+
+    def solve(keep: NDArray[np.bool_], bend: float | None = None) -> NDArray[np.float64]:
+        """The weighted least-squares parameters on the `keep` pixels (a fixed at `bend`)."""
         sw = np.sqrt(weights[keep])
         a_mat, b_vec = design[keep] * sw[:, None], xs[keep] * sw
         if prior is not None:
             a_mat = np.vstack([a_mat, prior_rows * prior_sw[:, None]])
             b_vec = np.concatenate([b_vec, prior_targets * prior_sw])
-        params = np.linalg.lstsq(a_mat, b_vec, rcond=None)[0]
+        if bend is None:
+            return np.asarray(np.linalg.lstsq(a_mat, b_vec, rcond=None)[0], np.float64)
+        rest = np.linalg.lstsq(a_mat[:, 1:], b_vec - a_mat[:, 0] * bend, rcond=None)[0]
+        return np.concatenate([[bend], rest])
+
+    keep = used = np.ones(len(ys), bool)
+    params = np.zeros(5)
+    for _ in range(2):
+        used = keep
+        params = solve(used)
         keep = np.abs(design @ params - xs) < outlier_px
         if keep.sum() < 10:
             break
+    if abs(params[0]) > max_bend:
+        params = solve(used, float(np.copysign(max_bend, params[0])))
     a, b, c, d, e = params
     return np.array([a, b - e / 2, c - d / 2]), np.array([a, b + e / 2, c + d / 2])
