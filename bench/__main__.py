@@ -26,6 +26,7 @@ from app.record import read_record
 from app.reframe import (
     REAR_FRAMINGS,
     UNTOLD_ROLL_FRAMINGS,
+    WIDE_LENS_FRAMING,
     Framing,
     dusk_framings,
     framing_table,
@@ -321,6 +322,7 @@ def quality(data: Path, report: dict[str, Any]) -> None:
         upright_framing(source),
         *dusk_framings(source),
         *REAR_FRAMINGS,
+        WIDE_LENS_FRAMING,
     ]
     report["framings"] = framing_table(clips, calibration, framings)
     # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to

@@ -13,6 +13,7 @@ import pytest
 from app.evaluate import FrameLabels, LabelledVehicle, iou, load_labels_document
 from app.reframe import (
     REAR_FRAMINGS,
+    WIDE_LENS_FRAMING,
     Framing,
     distance_ratios,
     dusk_framings,
@@ -53,6 +54,7 @@ def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
         upright_framing((1280, 720)),
         *dusk_framings((1280, 720)),
         *REAR_FRAMINGS,
+        WIDE_LENS_FRAMING,
     ],
     ids=lambda f: f.name,
 )
