@@ -72,8 +72,8 @@ class LaneConfig:
     # ... nor, at our speed v, one tighter than v^2 / this: the sideways acceleration in m/s^2 of
     # taking the bend. Roads are built for about 2 at their design speed (superelevation and side
     # friction, ~0.2 g); a fit bending more (a wide lens's lines bowed, a dash seen askew) is
-    # refitted at the tightest bend believed: the LA clip read 230-340 m at 106-121 km/h on a
-    # straight freeway (3-5 m/s^2), the shared clips' bends 2 at most.
+    # refitted at the tightest bend believed: the LA clip read 150-290 m at 100-120 km/h on a
+    # straight freeway (up to 5.7 m/s^2), the shared clips' bends 2 at most.
     max_sideways_mps2: float = 3.0
     # ... nor one running off more than this from straight ahead at the car: a lane change
     # turns the car by 2-5 degrees, at 8 it would cross a lane in 26 m; the lines a car crosses

@@ -279,7 +279,7 @@ class LaneFinder:
         advance = self.motion.advance
         if advance is None:
             return np.inf
-        speed = abs(advance) * cfg.at_rate(self.fps).frame_rate
+        speed = abs(advance) * (self.fps if self.fps > 0 else cfg.frame_rate)
         radius = speed**2 / cfg.max_sideways_mps2
         if radius <= cfg.min_radius_m:
             return np.inf
