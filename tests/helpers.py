@@ -4,6 +4,7 @@ synthetic footage."""
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.sources import VideoInfo, probe_video, read_frames
+
+
+def interruptible() -> None:
+    """For a child process (`preexec_fn`): Ctrl-C's SIGINT acts again. A shell runs background
+    jobs with SIGINT ignored, and a child inherits that, so a suite run as one would not see
+    its subprocesses interrupted."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def run_cli(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:

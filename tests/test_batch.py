@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 import pytest
 from distributed import Client
 
-from tests.helpers import read_record, run_cli
+from tests.helpers import interruptible, read_record, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -222,7 +222,13 @@ def test_real_scheduler_and_a_worker_killed_mid_run(inputs: Path, tmp_path: Path
 def test_ctrl_c_keeps_what_finished_and_the_next_run_resumes(inputs: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     command = _batch(inputs, out, "--workers", "1", "--no-video")
-    batch = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    batch = subprocess.Popen(
+        command,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=interruptible,
+    )
     manifest = out / "table" / "manifest.parquet"
     deadline = time.time() + 120
     while time.time() < deadline and not manifest.exists():

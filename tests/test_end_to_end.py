@@ -16,7 +16,13 @@ import pytest
 from app.drivers import MONOCHROME_NOTE
 from app.sources import ffmpeg_binary, probe_video, read_frames
 from camera_cal import default_calibration_path
-from tests.helpers import assert_one_line_error, count_frames, read_record, run_cli
+from tests.helpers import (
+    assert_one_line_error,
+    count_frames,
+    interruptible,
+    read_record,
+    run_cli,
+)
 
 
 @pytest.fixture(scope="module")
@@ -171,6 +177,7 @@ def test_ctrl_c_leaves_no_output(data_dir: Path, tmp_path: Path) -> None:
         ],
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=interruptible,
     )
     # Interrupt once frames are being written (a temporary record with some lines in it).
     deadline = time.time() + 60
