@@ -98,7 +98,7 @@ def cut_edges(
             boxes[:, 2] >= x1 - margin,
             boxes[:, 3] >= y1 - margin,
         ]
-    ).reshape(-1, 4)
+    )
 
 
 def covered_share(

@@ -229,10 +229,9 @@ def search_band(
     due = np.flatnonzero(decision.ravel() >= heats_from)
     # The verifier and the mirror image read the few windows that could heat, not the band:
     # scoring the band again cost as much as the model's own score (2 ms a frame at 720p).
-    verified, flipped = (
-        None if extra is None else _scored_at(maps, extra, cy.ravel(), cx.ravel(), due)
-        for extra in (verifier, mirrored)
-    )
+    rows, cols = cy.ravel(), cx.ravel()
+    verified = None if verifier is None else _scored_at(maps, verifier, rows, cols, due)
+    flipped = None if mirrored is None else _scored_at(maps, mirrored, rows, cols, due)
     # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
     sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
     px, py = cx.ravel() * cfg.pixels_per_cell, cy.ravel() * cfg.pixels_per_cell
