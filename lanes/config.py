@@ -94,6 +94,10 @@ class LaneConfig:
     # the line the car is astride, and the carriageway between the outer lines is where it is.
     one_lane_max_m: float = 4.6
     astride_m: float = 0.9
+    # A lane no wider than `one_lane_max_m` holds no line along its middle: paint there in this
+    # share of the rows (a solid line; a dashed one paints 25-40 %, project_cut_2's tar seam
+    # 20-25 %) means one of its sides is a kerb or fence beyond an edge line (India's town).
+    solid_line_rows: float = 0.5
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24
 

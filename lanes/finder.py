@@ -186,11 +186,11 @@ class LaneFinder:
             fits = [fit_line(p, bend) if ok else None for p, ok in zip(pixels, enough, strict=True)]
         sample = self._width_sample(fits, paint.mask, view)
         status = self._check_and_update(fits, pixels, view)
-        inside = self._line_inside(paint, view)
+        inside, astride = self._line_inside(paint, view)
         if inside is not None:
             status = (*status, inside)
         believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
-        lane, doubt = self._estimate(view, width_known)
+        lane, doubt = self._estimate(view, width_known) if astride is None else (None, astride)
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
@@ -237,38 +237,42 @@ class LaneFinder:
             sample /= 2
         return sample * view.ground_scale
 
-    def _line_inside(self, paint: Paint, view: BirdsEye) -> str | None:
+    def _line_inside(self, paint: Paint, view: BirdsEye) -> tuple[str | None, str | None]:
         """Where a lane line runs inside the lane the lines' history gives (a side made up at
-        the standard width, or lines more than `one_lane_max_m` apart) and the camera is at
-        least `astride_m` from it, that line bounds our lane: it takes the place of the line
-        beyond it in that side's history (a thin dashed line has too little paint for a side
-        of its own, and the side was made up across it). A note of it, or None."""
+        the standard width, or lines more than `one_lane_max_m` apart; in a narrower lane a
+        solid line, `solid_line_rows`) and the camera is at least `astride_m` from it, that
+        line bounds our lane: it takes the place of the line beyond it in that side's history
+        (a thin dashed line has too little paint for a side of its own, and the side was made
+        up across it; a kerb or fence was taken for a side beyond a solid edge line). A note
+        of it, or None; and why there is no lane where the camera is astride a solid line
+        inside a narrow one (one of its sides is no lane line), or None."""
         cfg = self.config
         bh = view.size[1]
         lines = self._history_lane(view)
         if lines is None:
-            return None
+            return None, None
         left, right, made_up = lines
         width_m = float(lane_widths(left, right, np.array([float(bh)]))[0] * view.xm_per_px)
-        if not made_up and width_m <= cfg.one_lane_max_m:
-            return None
+        narrow = not made_up and width_m <= cfg.one_lane_max_m
         half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
         share, coverage = paint_between(paint.mask, left, right, MIDDLE_SHARES, half_width)
-        if coverage < cfg.middle_line_rows:
-            return None
+        if coverage < (cfg.solid_line_rows if narrow else cfg.middle_line_rows):
+            return None, None
         curve = left + share * (right - left)
         apart_m = (view.camera_x - float(evaluate_fit(curve, bh))) * view.xm_per_px
         if abs(apart_m) < cfg.astride_m:
-            return None
+            if narrow:
+                return None, f"astride a solid line inside a {width_m:.1f} m lane"
+            return None, None
         margin = max(1, int(cfg.prior_margin_m / view.xm_per_px))
         fit = fit_line(prior_search(paint, curve, margin), self._max_bend(view))
         if fit is None:
-            return None
+            return None, None
         side = "right" if apart_m < 0 else "left"  # the camera left of the line: our right side
         beyond = self.right if apart_m < 0 else self.left
         beyond.reset()
         beyond.accept(fit)
-        return f"{side}: the line inside the lane, {share:.2f} of its {width_m:.1f} m"
+        return f"{side}: the line inside the lane, {share:.2f} of its {width_m:.1f} m", None
 
     def _max_bend(self, view: BirdsEye) -> float:
         """The largest y^2 term of a line's fit in `view`'s pixels that a road bends by at our
