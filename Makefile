@@ -30,10 +30,14 @@ NEGATIVE_CLIPS := $(wildcard $(WILD)/rural_2lane_wet.mp4 $(WILD)/night_highway_i
 # false alarms of dimmed, grainy copies of the same clips (`mine --dusk`).
 # The 32 px model reads the smallest windows (cars 3-4 % of the height), with its own verifier;
 # the low-resolution model reads pictures under 540 rows (trained also on compressed copies).
+# Monochrome footage is read by twins of the 64 and 32 px models and their verifiers trained
+# on the patches without colour (the verifiers' hard negatives mined from the clips so).
 train: data
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/default.npz
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/small.npz --patch 32
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/lowres.npz --degrade
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/grey.npz --grey
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/grey_small.npz --patch 32 --grey
 ifneq ($(NEGATIVE_CLIPS),)
 	$(BIN)/roadview mine $(NEGATIVE_CLIPS) --out output/hard_negatives --every 1
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/verifier.npz \
@@ -43,6 +47,12 @@ ifneq ($(NEGATIVE_CLIPS),)
 	$(BIN)/roadview mine $(NEGATIVE_CLIPS) --out output/dusk_negatives --every 1 --dusk
 	$(BIN)/roadview train --data $(DATA) --out vehicles/models/dark_verifier.npz \
 		--hard-negatives output/hard_negatives --hard-negatives output/dusk_negatives
+	$(BIN)/roadview mine $(NEGATIVE_CLIPS) --out output/grey_negatives --every 1 --grey \
+		--model vehicles/models/grey.npz
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/grey_verifier.npz --grey \
+		--hard-negatives output/grey_negatives
+	$(BIN)/roadview train --data $(DATA) --out vehicles/models/grey_small_verifier.npz \
+		--patch 32 --grey --hard-negatives output/grey_negatives
 else
 	@echo "no wild clips in $(WILD): the verifiers are not retrained"
 endif

@@ -38,7 +38,9 @@ def build_stages(
     shipped dark verifier) unless `verify` is off.
     The smallest windows are read by the shipped 32 px model unless `small` is off. With the
     shipped model (no `model` nor `classifier` given), pictures of few rows are read by the
-    shipped low-resolution model (see `DetectorConfig.lowres_rows`) unless `lowres` is off.
+    shipped low-resolution model (see `DetectorConfig.lowres_rows`) unless `lowres` is off, and
+    monochrome pictures by the shipped grey models (with their verifiers unless `verify` is off;
+    the 32 px one unless `small` is off).
     """
     lane_stage = vehicle_stage = None
     if lanes:
@@ -50,6 +52,7 @@ def build_stages(
         from vehicles.detector import Scorer, VehicleDetector
         from vehicles.model import (
             default_dark_verifier_path,
+            default_grey_paths,
             default_lowres_path,
             default_small_paths,
             default_verifier_path,
@@ -70,7 +73,24 @@ def build_stages(
         # On a dark road the shipped verifier gives way to its twin that also learned a dim
         # sensor's grain; a verifier of the user's own checks every road.
         dark = load_model(default_dark_verifier_path()) if verify and verifier is None else None
+        grey = None
+        if shipped:
+            sizes = default_grey_paths() if small else default_grey_paths()[:1]
+            grey = {
+                scorer.model.config.patch_size: scorer
+                for scorer in (
+                    Scorer.of(load_model(path), load_model(check) if verify else None)
+                    for path, check in sizes
+                )
+            }
         vehicle_stage = VehicleDetector(
-            classifier, config, keep_debug, checker, twin, lowres=coarse, dark_verifier=dark
+            classifier,
+            config,
+            keep_debug,
+            checker,
+            twin,
+            lowres=coarse,
+            dark_verifier=dark,
+            grey=grey,
         )
     return Stages(lane_stage, vehicle_stage)

@@ -237,6 +237,7 @@ FRAME_COLUMNS = (
     ("ttc_s", "double"),
     ("road_grey", "double"),
     ("grain", "double"),
+    ("monochrome", "bool"),  # read by the grey models (the record's monochrome)
     ("horizon_y", "double"),
     ("ground_scale", "double"),
     ("rear", "bool"),  # a rear camera's frame (the record's facing)
@@ -296,6 +297,7 @@ def write_table_parts(
             "ttc_s": r.get("ttc_s"),
             "road_grey": r.get("road_grey"),
             "grain": r.get("grain"),
+            "monochrome": bool(r.get("monochrome")),
             "horizon_y": r.get("horizon_y"),
             "ground_scale": r.get("ground_scale"),
             "rear": seen_from_behind(r),

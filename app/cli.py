@@ -619,6 +619,13 @@ def train_command(
             help="Also train on each patch as small compressed footage shows it (360-480 rows).",
         ),
     ] = False,
+    grey: Annotated[
+        bool,
+        typer.Option(
+            "--grey/--no-grey",
+            help="Train on each patch without its colour: a model of monochrome footage.",
+        ),
+    ] = False,
 ) -> None:
     """Train the vehicle classifier (grouped C search, calibration) and save it without pickle."""
     from app.progress import Progress
@@ -650,6 +657,7 @@ def train_command(
             n_jobs=jobs,
             mirror=mirror,
             degrade=degrade,
+            grey=grey,
             # A given C is the whole grid: no search.
             c_grid=TrainConfig.c_grid if c is None else (c,),
         ),
@@ -684,6 +692,13 @@ def mine_command(
             "night), read as 'process' reads a dark road: for the dark verifier.",
         ),
     ] = False,
+    grey: Annotated[
+        bool,
+        typer.Option(
+            "--grey/--no-grey",
+            help="Mine each clip without its colour (with a grey --model): for the grey verifiers.",
+        ),
+    ] = False,
 ) -> None:
     """Cut the windows the vehicle model is sure of in clips without vehicles into patches, for
     'train --hard-negatives': what fooled it there is learned as road."""
@@ -701,7 +716,9 @@ def mine_command(
     ).vehicles
     assert detector is not None
     dimmings = DUSK if dusk else ()
-    total = mine_clips(videos, detector, out, share, every, log=typer.echo, dimmings=dimmings)
+    total = mine_clips(
+        videos, detector, out, share, every, log=typer.echo, dimmings=dimmings, grey=grey
+    )
     typer.echo(f"wrote {total} patches to {out}")
 
 

@@ -62,7 +62,7 @@ def scene_picture(frame: Frame, scene: SceneGeometry, roll_deg: float = 0.0) -> 
     --horizon) with the ground scale once it moved from 1 and the turn the frame was levelled
     by (`roll_deg`, stated or read), the road's vanishing point on it (a circle, once
     estimated), the boxes of burnt-in captions (red), and the road's grey level and grain once
-    measured."""
+    measured (and that the picture is read as monochrome, where it is)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -84,6 +84,7 @@ def scene_picture(frame: Frame, scene: SceneGeometry, roll_deg: float = 0.0) -> 
         )
     if scene.road_grey is not None and scene.grain is not None:
         light = f"road grey {scene.road_grey:.0f}, grain {scene.grain:.2f}"
+        light += ", monochrome (grey models)" if scene.monochrome else ""
         cv2.putText(picture, light, (x0 + 10, y0 + 30), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.bonnet_y is not None:
         cv2.putText(

@@ -127,8 +127,8 @@ def roll_contradicted_note(stated_deg: float, read_deg: float) -> str:
 
 # Told when a video has no colour: the vehicle classifier learned colour footage (README).
 MONOCHROME_NOTE = (
-    "monochrome: the vehicle classifier learned colour footage and finds few vehicles in it "
-    "(README, Known weaknesses); the lanes are unaffected"
+    "monochrome: its vehicles are read by the models trained on grey copies of the patches, "
+    "less sure than in colour (README, Monochrome footage); the lanes are unaffected"
 )
 
 

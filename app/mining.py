@@ -16,6 +16,7 @@ import numpy as np
 from app.errors import InputError
 from app.sources import ffmpeg_binary, probe_video, read_frames
 from camera_cal import SceneTracker
+from vehicles.augment import greyed
 from vehicles.detector import VehicleDetector
 from vehicles.mining import surest_apart, window_patches
 
@@ -86,13 +87,14 @@ def mine_clip(
     per_frame: int = 8,
     as_seen: bool = False,
     name: str | None = None,
+    grey: bool = False,
 ) -> int:
     """Write the surest windows of every `every`-th frame of the first `share` of `video` (a
     clip without vehicles) to `out` as `<name>_<frame>_<k>.png` (`name`: the clip's); how many.
     The windows are placed from the scene as in `roadview process` (no undistortion: footage of
     an unknown camera) and, `as_seen`, read the picture as `process` reads it (on a dark road
-    the mean of the last frames). The rest of the clip is left for measuring what the mined
-    patches did."""
+    the mean of the last frames); `grey`: without its colour (for the grey verifiers, with a
+    grey model). The rest of the clip is left for measuring what the mined patches did."""
     info = probe_video(video)
     tracker = SceneTracker(info.size, detector.config.reference_horizon * info.size[1])
     detector.reset(info.fps)
@@ -102,6 +104,8 @@ def mine_clip(
         scene = tracker.update(frame)
         if as_seen:
             frame = detector.seen(frame, scene.road_grey, scene.grain)
+        if grey:
+            frame = greyed(frame)
         if index % every:
             continue
         placed = tracker.placement
@@ -127,10 +131,12 @@ def mine_clips(
     every: int = 3,
     log: Callable[[str], None] = lambda message: None,
     dimmings: Sequence[Dimming] = (),
+    grey: bool = False,
 ) -> int:
     """`mine_clip` over `videos` into the folder `out`, which appears only when all are done
     (written beside it, then renamed; an older `out` is replaced). With `dimmings`, each clip's
-    copies so dimmed are mined instead, read as `process` reads them."""
+    copies so dimmed are mined instead, read as `process` reads them; `grey`: each clip
+    without its colour."""
     out.parent.mkdir(parents=True, exist_ok=True)
     total = 0
     with tempfile.TemporaryDirectory(prefix=f".{out.name}.", dir=out.parent) as tmp:
@@ -140,11 +146,13 @@ def mine_clips(
             for k, dimming in enumerate(dimmings):
                 copy = dimmed_copy(video, dimming, Path(tmp) / f"dim{k}.mp4")
                 name = f"{video.stem}_dim{k}"
-                count = mine_clip(copy, detector, part, share, every, as_seen=True, name=name)
+                count = mine_clip(
+                    copy, detector, part, share, every, as_seen=True, name=name, grey=grey
+                )
                 log(f"{video.name}, dimmed ({dimming.filters()}): {count} patches")
                 total += count
             if not dimmings:
-                count = mine_clip(video, detector, part, share, every)
+                count = mine_clip(video, detector, part, share, every, grey=grey)
                 log(f"{video.name}: {count} patches")
                 total += count
         if out.exists():

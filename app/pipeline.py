@@ -538,13 +538,14 @@ class Pipeline:
         return replace(found, detections=Detections(d.boxes, d.scores, moved))
 
     def _for_vehicles(self, placement: dict[str, Any], scene: SceneGeometry) -> dict[str, Any]:
-        """The placement the vehicle stage takes: the scene's, with the cars' ground scale and
-        the road's lightness and grain."""
+        """The placement the vehicle stage takes: the scene's, with the cars' ground scale, the
+        road's lightness and grain, and whether the picture is monochrome."""
         return {
             **placement,
             "ground_scale": self._car_scale,
             "road_grey": scene.road_grey,
             "grain": scene.grain,
+            "monochrome": scene.monochrome,
         }
 
     def _finish(self, started: _Started) -> FrameOutput:

@@ -82,6 +82,8 @@ def frame_record(
         record["ground_scale"] = round(result.scene.ground_scale, 3)
         record["road_grey"] = _rounded(result.scene.road_grey, 1)
         record["grain"] = _rounded(result.scene.grain, 2)
+        if result.scene.monochrome:
+            record["monochrome"] = True
         record["overlays"] = [list(box) for box in result.scene.overlays]
     facts = result.facts
     if result.vehicles is not None:

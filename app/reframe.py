@@ -30,6 +30,7 @@ from app.sinks import VideoSink
 from app.sources import FOCAL_LENGTH_KEY, Frame, ffmpeg_binary, probe_video, read_frames
 from camera_cal import Calibration, undistorter_for
 from camera_cal.undistort import equivalent_focal_mm, output_camera_matrix
+from vehicles.augment import greyed
 from vehicles.detections import iou_matrix
 from vehicles.model import VehicleModel
 
@@ -61,7 +62,8 @@ class Framing:
     shows them); `facing`: what roadview is told of that (`--facing`); `focal_mm`: the copy
     tagged with its lens's focal length in 35 mm terms, as a phone tags its videos; `bow`:
     after the light, the picture seen through a wider lens's barrel distortion (`bowed`), its
-    corners kept where they are (not with `roll`)."""
+    corners kept where they are (not with `roll`); `grey`: after the light, its colour taken
+    out, as an infrared night camera or a grey-only export shows it."""
 
     name: str
     crop: Box | None = None
@@ -77,6 +79,7 @@ class Framing:
     facing: str = "auto"
     focal_mm: float | None = None
     bow: float = 0.0
+    grey: bool = False
 
     @property
     def unchanged(self) -> bool:
@@ -91,6 +94,7 @@ class Framing:
             and self.roll == 0
             and not self.reverse
             and self.bow == 0
+            and not self.grey
         )
 
     def source_frame(self, frame: int, source_frames: int) -> int:
@@ -243,6 +247,9 @@ REAR_FRAMINGS = (
 # the corners (the middle enlarged 1.3 times against the corners, the shipped lens 1.1 times).
 WIDE_LENS_FRAMING = Framing("a wider lens's distortion", bow=0.3)
 
+# An infrared night camera's picture (or a grey-only export): the clips without their colour.
+MONOCHROME_FRAMING = Framing("monochrome (no colour)", grey=True)
+
 
 def bowed_source(
     x: NDArray[np.floating[Any]], y: NDArray[np.floating[Any]], size: tuple[int, int], bow: float
@@ -290,6 +297,8 @@ def reframe_image(frame: Frame, framing: Framing) -> Frame:
         out = out[:, ::-1]
     if framing.light != 1:
         out = cv2.convertScaleAbs(out, alpha=framing.light)
+    if framing.grey:
+        out = greyed(out)
     if framing.bow:
         h, w = out.shape[:2]
         columns, rows = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))

@@ -72,6 +72,7 @@ class KeepLeft:
         ground_scale: float = 1.0,
         road_grey: float | None = None,
         grain: float | None = None,
+        monochrome: bool = False,
     ) -> VehicleResult:
         """`VehicleDetector.process` of the mirrored frame, mirrored back."""
         width = frame.shape[1]
@@ -85,6 +86,7 @@ class KeepLeft:
             ground_scale,
             road_grey,
             grain,
+            monochrome,
         )
         return VehicleResult(
             mirrored_detections(found.detections, width),

@@ -24,6 +24,7 @@ from app.mining import dimmed_copy, grainy
 from app.pipeline import Pipeline
 from app.record import read_record
 from app.reframe import (
+    MONOCHROME_FRAMING,
     REAR_FRAMINGS,
     UNTOLD_ROLL_FRAMINGS,
     WIDE_LENS_FRAMING,
@@ -323,6 +324,7 @@ def quality(data: Path, report: dict[str, Any]) -> None:
         *dusk_framings(source),
         *REAR_FRAMINGS,
         WIDE_LENS_FRAMING,
+        MONOCHROME_FRAMING,
     ]
     report["framings"] = framing_table(clips, calibration, framings)
     # The same clips re-encoded as `process` writes (x264 ultrafast: no deblocking filter), to

@@ -54,6 +54,9 @@ class SceneGeometry:
     # the encoder kept it), the median of the last few seconds; None until measured. The shared
     # and wild clips read 0-0.35, grainy copies 0.6 and up (see `grain`).
     grain: float | None = None
+    # The picture has carried no colour in its last few samples (an infrared night camera's, a
+    # grey-only export; `monochrome`): the vehicle stage reads it with its grey models.
+    monochrome: bool = False
 
 
 def road_patch(live: Box, horizon_y: float) -> tuple[slice, slice]:
@@ -320,7 +323,10 @@ class SceneTracker:
     moves it by a few per cent; a camera turned sideways by more).
     `fixed_scale` is the scale height of a calibrated lens; without it the live box gives it.
     The ground scale is learned from the lane stage's width samples (`observe_lane_width`;
-    `ground` sets how).
+    `ground` sets how). Every `light_every` frames the road's grey level and grain are sampled
+    (their medians over `light_window` samples), and whether the live picture has colour: it is
+    monochrome once `colour_samples` samples in a row had none (a camera switching to infrared
+    at night is read so a fraction of a second after; one sample with colour ends it).
     """
 
     def __init__(
@@ -341,6 +347,7 @@ class SceneTracker:
         ground: GroundScale | None = None,
         light_every: int = 5,
         light_window: int = 15,
+        colour_samples: int = 3,
         full_size_first: bool = False,
         weak_edges: float = 0.6,
     ) -> None:
@@ -382,6 +389,8 @@ class SceneTracker:
         self.light_every = light_every
         self._greys: deque[float] = deque(maxlen=light_window)  # the road's recent grey levels
         self._grains: deque[float] = deque(maxlen=light_window)  # ... and grain
+        # Whether each of the last few samples of the live picture had no colour.
+        self._colourless: deque[bool] = deque(maxlen=colour_samples)
         # The geometry and placement a look ahead gave, until the horizon's own estimate stands.
         self._ahead: tuple[SceneGeometry, dict[str, Any]] | None = None
 
@@ -482,6 +491,8 @@ class SceneTracker:
             self._greys.append(road_grey(grey, live, self._current.horizon_y))
             source = grey if decoded is None else decoded
             self._grains.append(grain(source, live, self._current.horizon_y))
+            x0, y0, x1, y1 = live
+            self._colourless.append(monochrome(rgb[y0:y1, x0:x1]))
         self._count += 1
         vanishing_x = None
         if self.fixed_horizon is not None:
@@ -504,6 +515,7 @@ class SceneTracker:
             self.ground.value,
             float(np.median(self._greys)) if self._greys else None,
             float(np.median(self._grains)) if self._grains else None,
+            len(self._colourless) == self._colourless.maxlen and all(self._colourless),
         )
         tolerance = self.settle * self.size[1]
         placed_horizon, placed_live, _ = self._placed

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vehicles.augment import Degradation, degrade_patch, degraded
+from vehicles.augment import Degradation, degrade_patch, degraded, greyed
 from vehicles.dataset import PatchSet, group_key, load_patches
 from vehicles.features import FeatureConfig, feature_maps, mirror_order, patch_features
 from vehicles.model import (
@@ -328,6 +328,27 @@ def test_a_model_trained_on_degraded_copies_too_reads_small_compressed_cars(
         assert model.report["degraded"] is degrade
     assert accuracy[True] >= accuracy[False] + 0.05, accuracy
     assert gaps[True] < 0.6 * gaps[False], gaps
+
+
+def test_a_model_trained_without_colour_reads_monochrome_patches(patches: PatchSet) -> None:
+    """With `grey`, every patch trains without its colour (its luma in all three channels, as a
+    monochrome camera's frames decode): on patches of held-out groups so, such a model is far
+    more accurate than one trained in colour, which takes grey cars for road."""
+    groups = np.unique(patches.groups)[::2]
+    train = _subset(patches, groups, 300, seed=4)
+    probe = _subset(patches, np.unique(patches.groups)[1::2], 150, seed=5)
+    grey = greyed(probe.images)
+    assert grey.shape == probe.images.shape
+    assert (grey[..., 0] == grey[..., 1]).all() and (grey[..., 1] == grey[..., 2]).all()
+    accuracy = {}
+    for without_colour in (False, True):
+        model = train_model(
+            train, cfg=TrainConfig(c_grid=(1e-3,), folds=2, n_jobs=1, grey=without_colour)
+        )
+        x = extract_features(grey, model.config, n_jobs=1)
+        accuracy[without_colour] = float((model.predict(x) == probe.labels).mean())
+        assert model.report["grey"] is without_colour
+    assert accuracy[True] >= accuracy[False] + 0.1, accuracy
 
 
 def test_shipped_low_resolution_model(patches: PatchSet) -> None:

@@ -77,9 +77,8 @@ def test_other_resolution_same_aspect_is_scaled(clips: dict[str, Path], tmp_path
 
 
 def test_a_monochrome_video_is_told_of(clips: dict[str, Path], tmp_path: Path) -> None:
-    """A grey copy (as an infrared night camera films): processed, with one note that the
-    vehicle classifier learned colour footage; without the vehicle stage there is nothing to
-    say."""
+    """A grey copy (as an infrared night camera films): processed, with one note that its
+    vehicles are read by the grey models; without the vehicle stage there is nothing to say."""
     result = run_cli("process", clips["grey"], "-o", tmp_path / "o.mp4")
     assert result.returncode == 0, result.stderr
     assert [line for line in result.stderr.splitlines() if "monochrome" in line] == [

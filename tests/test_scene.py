@@ -85,6 +85,20 @@ def test_vanishing_point_and_bars_of_a_synthetic_road() -> None:
     assert all(fixed.update(frame).horizon_y == 222.0 for _ in range(8))
 
 
+def test_a_picture_is_monochrome_after_three_samples_without_colour() -> None:
+    """The live picture's colour is sampled every 5th frame: three samples in a row without any
+    make the scene monochrome (a camera switching to infrared at night, read 0.4-0.6 s after);
+    one sample with colour ends it."""
+    size = (640, 360)
+    colour = _road(size, (320.0, 150.0))
+    grey = cv2.cvtColor(cv2.cvtColor(colour, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
+    tracker = SceneTracker(size, default_horizon=200.0)
+    assert not any(tracker.update(colour).monochrome for _ in range(10))
+    # Samples at frames 10, 15 and 20: monochrome from the third on.
+    assert [tracker.update(grey).monochrome for _ in range(15)] == [k >= 10 for k in range(15)]
+    assert not tracker.update(colour).monochrome  # frame 25, a sample with colour
+
+
 def test_the_lines_of_a_dim_road_are_found_as_by_day() -> None:
     """A quarter and a sixth of the light (paint at 60 and 36 grey levels): the edge thresholds
     follow the picture's brightest paint, so its lines give the vanishing point of the bright

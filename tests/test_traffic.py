@@ -58,15 +58,18 @@ class _Recorder:
 
 def test_keep_left_shows_the_stage_the_mirrored_frame_and_scene() -> None:
     """The stage reads the frame flipped, with the live box, the vanishing column and caption
-    boxes mirrored (horizon, scale, ground scale, the road's grey and grain as they are); the car it
+    boxes mirrored (horizon, scale, ground scale, the road's grey and grain, and whether the
+    picture is monochrome, as they are); the car it
     finds, its debug boxes and heat come back mirrored, its id and score unchanged."""
     frame = np.zeros((48, 100, 3), np.uint8)
     frame[:, :10] = 200  # a bright left edge
     recorder = _Recorder([10.0, 20.0, 30.0, 40.0])
     stage = KeepLeft(cast(VehicleDetector, recorder))
-    found = stage.process(frame, 20.0, (5, 0, 90, 48), 45.0, 60.0, ((0, 0, 20, 8),), 0.8, 33.0, 0.7)
+    found = stage.process(
+        frame, 20.0, (5, 0, 90, 48), 45.0, 60.0, ((0, 0, 20, 8),), 0.8, 33.0, 0.7, True
+    )
     np.testing.assert_array_equal(recorder.seen["frame"], cv2.flip(frame, 1))
-    mirrored = (20.0, (10, 0, 95, 48), 45.0, 40.0, ((80, 0, 100, 8),), 0.8, 33.0, 0.7)
+    mirrored = (20.0, (10, 0, 95, 48), 45.0, 40.0, ((80, 0, 100, 8),), 0.8, 33.0, 0.7, True)
     assert recorder.seen["args"] == mirrored
     np.testing.assert_array_equal(found.detections.boxes, [[70.0, 20.0, 90.0, 40.0]])
     assert found.detections.ids.tolist() == [7] and found.detections.scores.tolist() == [0.9]

@@ -232,6 +232,31 @@ def test_on_a_dark_road_the_dark_verifier_checks_the_windows(
     assert plain.scorers_for(plain.view((1280, 720)), dark=True)[64].verifier is verifier
 
 
+def test_a_monochrome_picture_is_read_by_the_grey_models() -> None:
+    """The shipped stage reads a monochrome picture with the models trained on grey patches
+    (64 and 32 px, each with its grey verifier) whatever its size or light, from P(vehicle)
+    0.98; a colour one as before. A model of the user's own reads every picture."""
+    from app.assembly import build_stages
+
+    detector = build_stages(lanes=False).vehicles
+    assert isinstance(detector, VehicleDetector)
+    for size in ((640, 360), (1280, 720)):
+        view = detector.view(size)
+        for dark in (False, True):
+            grey = detector.scorers_for(view, dark, monochrome=True)
+            assert sorted(grey) == [32, 64], size
+            assert all(s.model.report["grey"] and s.verifier is not None for s in grey.values())
+            assert all(s.verifier.report["grey"] for s in grey.values() if s.verifier)
+            colour = detector.scorers_for(view, dark)
+            assert not any(s.model.report.get("grey") for s in colour.values())
+    config = detector.config
+    assert config.min_probability_at(30.0, monochrome=True) == config.monochrome_min_probability
+    assert config.min_probability_at(None) == config.min_probability
+    own = build_stages(lanes=False, model=default_model_path()).vehicles
+    assert isinstance(own, VehicleDetector)
+    assert own.scorers_for(own.view((1280, 720)), monochrome=True)[64].model is own.model
+
+
 def _small() -> Scorer:
     model, verifier = default_small_paths()
     return Scorer.of(load_model(model), load_model(verifier))

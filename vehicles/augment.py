@@ -1,5 +1,6 @@
-"""Copies of training patches as other footage shows them: mirrored, or degraded as a small,
-compressed video frame is (fewer pixels, colour at half resolution, block compression)."""
+"""Copies of training patches as other footage shows them: mirrored, degraded as a small,
+compressed video frame is (fewer pixels, colour at half resolution, block compression), or
+without colour as a monochrome camera's."""
 
 from __future__ import annotations
 
@@ -28,6 +29,16 @@ class Degradation:
 def mirrored(images: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """Each (n, h, w, 3) patch flipped left to right."""
     return np.ascontiguousarray(images[:, :, ::-1])
+
+
+def greyed(images: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """Each RGB image of `images` (..., h, w, 3) with its colour taken out: its luma in all three
+    channels, as a monochrome camera's frames (an infrared night camera's) decode."""
+    flat = images.reshape(-1, *images.shape[-3:])
+    grey = [
+        cv2.cvtColor(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB) for image in flat
+    ]
+    return np.stack(grey).reshape(images.shape)
 
 
 def degrade_patch(image: NDArray[np.uint8], side: int, quality: int) -> NDArray[np.uint8]:

@@ -192,6 +192,7 @@ class VehicleDetector:
         small: Scorer | None = None,
         lowres: VehicleModel | None = None,
         dark_verifier: VehicleModel | None = None,
+        grey: dict[int, Scorer] | None = None,
     ) -> None:
         self.model = model
         self.config = config if config is not None else DetectorConfig()
@@ -212,6 +213,10 @@ class VehicleDetector:
         if dark_verifier is not None:
             self.dark_scorers = checked_by(self.scorers, dark_verifier)
             self.dark_lowres_scorers = checked_by(self.lowres_scorers, dark_verifier)
+        # Pictures without colour (an infrared night camera's, a grey-only export) are read by
+        # `grey`, the scorer of each patch size trained on grey copies of the patches: the
+        # colour models find no vehicle there (README, Monochrome footage). Missing: as in colour.
+        self.grey_scorers = grey or {}
         self.keep_debug = keep_debug
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
         self.heatmap, self.tracker, self.recent = self._fresh_history()
@@ -309,8 +314,13 @@ class VehicleDetector:
         ]
         return min(top for top, _ in spans), max(bottom for _, bottom in spans)
 
-    def scorers_for(self, view: View, dark: bool = False) -> dict[int, Scorer]:
-        """The scorer of each band's patch size for pictures seen as `view` (on a `dark` road)."""
+    def scorers_for(
+        self, view: View, dark: bool = False, monochrome: bool = False
+    ) -> dict[int, Scorer]:
+        """The scorer of each band's patch size for pictures seen as `view` (on a `dark` road;
+        `monochrome`: without colour, whatever their size or light, where grey scorers exist)."""
+        if monochrome and self.grey_scorers:
+            return self.grey_scorers
         lowres = view.scale_height < self.config.lowres_rows
         if dark:
             return self.dark_lowres_scorers if lowres else self.dark_scorers
@@ -323,14 +333,15 @@ class VehicleDetector:
         view: View | None = None,
         dark: bool = False,
         min_probability: float | None = None,
+        monochrome: bool = False,
     ) -> tuple[BandHits, ...]:
         """Window scores of the bands searched this frame (all bands when parity is None), and
         of their mirror images where the window reaches `min_probability` (None: the config's)
-        and the config checks them."""
+        and the config checks them (the scorers `scorers_for` gives)."""
         cfg = self.config
         bands = cfg.bands if parity is None else cfg.bands[parity::2]
         where = view or self.view((frame.shape[1], frame.shape[0]))
-        scorers = self.scorers_for(where, dark)
+        scorers = self.scorers_for(where, dark, monochrome)
         least = cfg.min_probability if min_probability is None else min_probability
         found = (
             search_band(
@@ -349,7 +360,11 @@ class VehicleDetector:
         return tuple(hit for hit in found if hit is not None)
 
     def window_terms(
-        self, hits: Sequence[BandHits], view: View, dark: bool = False
+        self,
+        hits: Sequence[BandHits],
+        view: View,
+        dark: bool = False,
+        monochrome: bool = False,
     ) -> tuple[NDArray[np.float64], ...]:
         """For every window of `hits`, in order: P(vehicle) by its band's model, its verifier's
         P(vehicle) (1 where that model has none or did not read the window), the weight of its
@@ -358,7 +373,7 @@ class VehicleDetector:
         eighth, so fewer of them overlap a small car: each of its hits heats 8 / 4 = 2 times as
         much (the square, 4, spoilt the boxes of 34-40 px cars; tried)."""
         cells = self.model.config.cells_per_patch
-        scorers = self.scorers_for(view, dark)
+        scorers = self.scorers_for(view, dark, monochrome)
         terms: list[tuple[NDArray[np.float64], ...]] = [(np.zeros(0),) * 4]
         for hit in hits:
             scorer = scorers[hit.band.patch]
@@ -390,6 +405,7 @@ class VehicleDetector:
         ground_scale: float = 1.0,
         road_grey: float | None = None,
         grain: float | None = None,
+        monochrome: bool = False,
     ) -> VehicleResult:
         """Detect, accumulate heat, label regions, and track for one undistorted RGB frame
         (bands placed from the scene's `horizon_y`, `live` box and `scale_height` when given,
@@ -398,9 +414,10 @@ class VehicleDetector:
         captions or parts of the car, do not heat; on a dark road, by the scene's `road_grey`,
         the windows read the mean of the last frames and less sure ones heat
         (`DetectorConfig.min_probability_at`); on a road of the scene's `grain` they read the
-        picture with its colour smoothed, and from more grain averaged too: `seen`). A window
-        heats where its verifier agrees and, in the larger bands, where it stands by its mirror
-        image (`mirror_backed`)."""
+        picture with its colour smoothed, and from more grain averaged too: `seen`; a picture
+        the scene found `monochrome` is read by the grey scorers). A window heats where its
+        verifier agrees and, in the larger bands, where it stands by its mirror image
+        (`mirror_backed`)."""
         cfg = self.config
         h, w = frame.shape[:2]
         view = self.view((w, h), horizon_y, live, scale_height, ground_scale)
@@ -410,10 +427,10 @@ class VehicleDetector:
         dark = cfg.is_dark(road_grey)
         rows = self.band_rows(view)
         seen, averaged, smoothed = self._read(frame, road_grey, grain, view.scale_height, rows)
-        least = cfg.min_probability_at(road_grey)
-        hits = self.search(seen, parity, view, dark, least)
+        least = cfg.min_probability_at(road_grey, monochrome)
+        hits = self.search(seen, parity, view, dark, least, monochrome)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        proba, checked, density, mirror = self.window_terms(hits, view, dark)
+        proba, checked, density, mirror = self.window_terms(hits, view, dark, monochrome)
         strong = proba >= least
         sure = checked >= cfg.min_verified
         if cfg.min_mirrored is not None:

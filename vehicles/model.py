@@ -56,6 +56,16 @@ def default_small_paths() -> tuple[Path, Path]:
     return folder / "small.npz", folder / "small_verifier.npz"
 
 
+def default_grey_paths() -> tuple[tuple[Path, Path], tuple[Path, Path]]:
+    """The committed models of monochrome footage, each with its verifier: the 64 px and the
+    32 px one, trained on grey copies of the patches (see `make train`)."""
+    folder = Path(__file__).with_name("models")
+    return (
+        (folder / "grey.npz", folder / "grey_verifier.npz"),
+        (folder / "grey_small.npz", folder / "grey_small_verifier.npz"),
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class VehicleModel:
     """Linear classifier on standardised patch features with calibrated probabilities."""

@@ -20,7 +20,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
 
-from vehicles.augment import degraded, mirrored
+from vehicles.augment import degraded, greyed, mirrored
 from vehicles.dataset import PatchSet
 from vehicles.features import FeatureConfig, patch_features
 from vehicles.model import VehicleModel
@@ -45,6 +45,8 @@ class TrainConfig:
     # Each patch also trains as a small, compressed video frame shows it (`vehicles.augment`):
     # colour at half resolution and block compression, as in footage of 360-480 rows.
     degrade: bool = False
+    # Every patch trains without its colour, and only so: the models of monochrome footage.
+    grey: bool = False
 
 
 def _features_chunk(images: NDArray[np.uint8], config: FeatureConfig) -> NDArray[np.float32]:
@@ -179,6 +181,8 @@ def train_model(
         images = np.concatenate([images, extra])
         y = np.concatenate([y, np.zeros(len(extra), np.int8)])
         groups = np.concatenate([groups, groups.max() + 1 + np.arange(len(extra)) // 30])
+    if cfg.grey:
+        images = greyed(images)
     x = extract_features(images, config, cfg.n_jobs, progress)
     n = len(x)
     # A copy (mirrored, degraded) joins its original's group: split, searched and scored with
@@ -231,6 +235,7 @@ def train_model(
         "n_non_vehicles": int((y[:n] == 0).sum()),
         "mirrored": cfg.mirror,
         "degraded": cfg.degrade,
+        "grey": cfg.grey,
         "n_hard_negatives": len(extra_negatives),
         "n_groups": len(np.unique(groups)),
         "platt": [float(sigmoid.a_), float(sigmoid.b_)],
