@@ -257,6 +257,20 @@ def test_a_monochrome_picture_is_read_by_the_grey_models() -> None:
     assert own.scorers_for(own.view((1280, 720)), monochrome=True)[64].model is own.model
 
 
+def test_a_stage_without_grey_models_reads_a_monochrome_picture_as_any(
+    model: VehicleModel, data_dir: Path
+) -> None:
+    """Told a picture is monochrome, a stage without grey scorers (a model of the user's own)
+    reads it with its models at their own bound, not the grey models' stricter one."""
+    frame = _rgb(data_dir / "test_images" / "test1.jpg")
+    still = DetectorConfig().for_still()
+    told, untold = (
+        VehicleDetector(model, still).process(frame, monochrome=m) for m in (True, False)
+    )
+    assert len(untold.detections) >= 2
+    np.testing.assert_array_equal(told.detections.boxes, untold.detections.boxes)
+
+
 def _small() -> Scorer:
     model, verifier = default_small_paths()
     return Scorer.of(load_model(model), load_model(verifier))

@@ -427,10 +427,13 @@ class VehicleDetector:
         dark = cfg.is_dark(road_grey)
         rows = self.band_rows(view)
         seen, averaged, smoothed = self._read(frame, road_grey, grain, view.scale_height, rows)
-        least = cfg.min_probability_at(road_grey, monochrome)
-        hits = self.search(seen, parity, view, dark, least, monochrome)
+        # The grey scorers' bound holds where they read the picture (a model of the user's own
+        # reads a monochrome one as any other).
+        grey = monochrome and bool(self.grey_scorers)
+        least = cfg.min_probability_at(road_grey, grey)
+        hits = self.search(seen, parity, view, dark, least, grey)
         boxes = np.concatenate([hit.boxes for hit in hits]) if hits else np.zeros((0, 4))
-        proba, checked, density, mirror = self.window_terms(hits, view, dark, monochrome)
+        proba, checked, density, mirror = self.window_terms(hits, view, dark, grey)
         strong = proba >= least
         sure = checked >= cfg.min_verified
         if cfg.min_mirrored is not None:
