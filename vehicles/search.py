@@ -234,7 +234,7 @@ def search_band(
     flipped = None if mirrored is None else _scored_at(maps, mirrored, rows, cols, due)
     # Scaled-band pixels back to frame pixels (resize maps pixel edges linearly).
     sx, sy = (x1 - x0) / size[0], (y1 - y0) / size[1]
-    px, py = cx.ravel() * cfg.pixels_per_cell, cy.ravel() * cfg.pixels_per_cell
+    px, py = cols * cfg.pixels_per_cell, rows * cfg.pixels_per_cell
     boxes = np.stack(
         [
             x0 + px * sx,
