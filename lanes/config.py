@@ -98,6 +98,15 @@ class LaneConfig:
     # share of the rows (a solid line; a dashed one paints 25-40 %, project_cut_2's tar seam
     # 20-25 %) means one of its sides is a kerb or fence beyond an edge line (India's town).
     solid_line_rows: float = 0.5
+    # A dashed line's dashes (lanes/dashes.py): paint in this share of the rows along it (a
+    # solid line paints more, 0.6-1), read within this many metres of it, runs nearer than
+    # `dash_bridge_m` joined (a dash the mask broke), dashes this long (metres) counted, and
+    # followed while their near end is in the view's rows from this share of its height down.
+    dash_share: tuple[float, float] = (0.1, 0.6)
+    dash_half_width_m: float = 0.3
+    dash_bridge_m: float = 1.5
+    dash_length_m: tuple[float, float] = (1.5, 7.0)
+    dash_near: float = 0.45
     straight_radius_m: float = 10_000.0  # larger radii are reported as straight (inf)
     polyline_points: int = 24
 

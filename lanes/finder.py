@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lanes.config import LaneConfig
+from lanes.dashes import DashTrack, near_ends, painted_rows
 from lanes.line import Line
 from lanes.measure import implausible_lane, lane_offset, lane_widths, radius_of_curvature
 from lanes.motion import RoadMotion
@@ -68,6 +69,9 @@ class LaneResult:
     # against the tuned camera's at the same rows: what the scene learns the ground scale from.
     width_sample: float | None = None
     width_believed: bool = False  # both lines of that sample passed the checks this frame
+    # The spacings of the dashes along this frame's dashed lines, in the view's metres (see
+    # lanes/dashes.py): a lens other than the one the view assumes reads them longer or shorter.
+    dash_spacings: tuple[float, ...] = ()
 
 
 class LaneFinder:
@@ -78,6 +82,7 @@ class LaneFinder:
         self.keep_debug = keep_debug
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
         self.left, self.right, self.motion = self._fresh_history()
+        self.dashes = self._fresh_dashes()
         self._view: BirdsEye | None = None
 
     def _fresh_lines(self) -> tuple[Line, Line]:
@@ -89,12 +94,17 @@ class LaneFinder:
         """Empty lines and road motion whose lengths cover the config's time at `fps`."""
         return *self._fresh_lines(), RoadMotion(self.config.at_rate(self.fps).motion_smoothing)
 
+    def _fresh_dashes(self) -> tuple[DashTrack, DashTrack]:
+        """No dashes followed on either side."""
+        return DashTrack(self.config.dash_near), DashTrack(self.config.dash_near)
+
     def reset(self, fps: float | None = None) -> None:
-        """Forget both lines' history and the road's motion; with `fps`, frames now come at
-        that rate (the history keeps covering the same time)."""
+        """Forget both lines' history, their dashes and the road's motion; with `fps`, frames
+        now come at that rate (the history keeps covering the same time)."""
         if fps is not None:
             self.fps = fps
         self.left, self.right, self.motion = self._fresh_history()
+        self.dashes = self._fresh_dashes()
 
     def view(
         self,
@@ -126,6 +136,7 @@ class LaneFinder:
         )
         if current is not None:  # the lines start afresh; the car drives on as fast
             self.left, self.right = self._fresh_lines()
+            self.dashes = self._fresh_dashes()  # placed in the old view's metres
             self.motion.new_view()
         return self._view
 
@@ -194,7 +205,31 @@ class LaneFinder:
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
-        return LaneResult(lane, debug, status, advance, sample, believed)
+        spacings = self._dash_spacings(paint.mask, lane, view, advance)
+        return LaneResult(lane, debug, status, advance, sample, believed, spacings)
+
+    def _dash_spacings(
+        self,
+        mask: NDArray[np.uint8],
+        lane: LaneEstimate | None,
+        view: BirdsEye,
+        advance_m: float | None,
+    ) -> tuple[float, ...]:
+        """The spacings of the dashes along the lane's dashed lines (as believed: paint in
+        `dash_share` of the rows along them) that the road's motion completed this frame, in
+        the view's metres (see `DashTrack`)."""
+        cfg = self.config
+        half_width = max(1, round(cfg.dash_half_width_m / view.xm_per_px))
+        fits = (None, None) if lane is None else (lane.left_fit, lane.right_fit)
+        found: list[float] = []
+        for fit, track in zip(fits, self.dashes, strict=True):
+            ends = np.zeros(0)
+            if fit is not None:
+                painted = painted_rows(mask, fit, half_width)
+                if cfg.dash_share[0] <= painted.mean() <= cfg.dash_share[1]:
+                    ends = near_ends(painted, view.ym_per_px, cfg.dash_bridge_m, cfg.dash_length_m)
+            found += track.update(ends, view.size[1], view.ym_per_px, advance_m)
+        return tuple(found)
 
     @staticmethod
     def _still(

@@ -67,6 +67,22 @@ def histogram_base(mask: NDArray[np.uint8], hint: float, spread: float) -> float
     return float(np.argmax(weighted)) if weighted.max() > 0 else hint
 
 
+def painted_along(
+    mask: NDArray[np.uint8], columns: NDArray[np.float64], half_width: int
+) -> NDArray[np.bool_]:
+    """Whether each row of the bird's-eye `mask` has paint within `half_width` pixels of the
+    column given for it: `columns` is (curves, rows), one column per row of each curve (False
+    where a curve's column is outside the view)."""
+    # Paint within `half_width` of a column is paint at that column of the widened mask.
+    wide = cv2.dilate((mask > 0).astype(np.uint8), np.ones((1, 2 * half_width + 1), np.uint8))
+    at = np.rint(columns)
+    inside = (at >= 0) & (at < mask.shape[1])
+    painted = np.zeros(at.shape, bool)
+    index = np.broadcast_to(np.arange(at.shape[1], dtype=np.intp)[None, :], at.shape)
+    painted[inside] = wide[index[inside], at[inside].astype(np.intp)] > 0
+    return painted
+
+
 def paint_between(
     mask: NDArray[np.uint8],
     left: Fit,
@@ -77,16 +93,10 @@ def paint_between(
     """The curve between two lines (at one of `shares` of the way from `left` to `right`) that
     has paint within `half_width` pixels in the most rows, and that share of rows: a line inside
     a lane means the two lines bound two lanes."""
-    # Paint within `half_width` of a column is paint at that column of the widened mask.
-    wide = cv2.dilate((mask > 0).astype(np.uint8), np.ones((1, 2 * half_width + 1), np.uint8))
     rows = np.arange(mask.shape[0], dtype=np.float64)
     xl, xr = evaluate_fit(left, rows), evaluate_fit(right, rows)
-    columns = np.rint(xl[None, :] + shares[:, None] * (xr - xl)[None, :])  # (shares, rows)
-    inside = (columns >= 0) & (columns < mask.shape[1])
-    painted = np.zeros(columns.shape, bool)
-    index = np.broadcast_to(rows.astype(np.intp)[None, :], columns.shape)
-    painted[inside] = wide[index[inside], columns[inside].astype(np.intp)] > 0
-    coverage = painted.mean(axis=1)
+    columns = xl[None, :] + shares[:, None] * (xr - xl)[None, :]  # (shares, rows)
+    coverage = painted_along(mask, columns, half_width).mean(axis=1)
     best = int(np.argmax(coverage))
     return float(shares[best]), float(coverage[best])
 

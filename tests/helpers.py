@@ -7,6 +7,7 @@ import json
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -82,6 +83,35 @@ def moving_road(
             frame[bonnet:] = (200, 200, 205)
         out.append(frame)
     return out
+
+
+def dashed_road(
+    frames: int, spacing_m: float, step_m: float, dash_m: float = 3.0
+) -> Iterator[NDArray[np.uint8]]:
+    """1280x720 frames of a straight road under the tuned lane warp (painted in its bird's-eye
+    view, in its metres, and seen through it): textured asphalt, a solid left line and a dashed
+    right one, a `dash_m` dash every `spacing_m`, streaming `step_m` towards the camera a frame."""
+    from lanes.config import LaneConfig
+    from lanes.finder import LaneFinder
+
+    config = LaneConfig()
+    view = LaneFinder(config).view((1280, 720))
+    bw, bh = view.size
+    step = step_m / view.ym_per_px
+    rows = bh + round(frames * step) + 8
+    rng = np.random.default_rng(3)
+    asphalt = cv2.GaussianBlur(rng.integers(70, 130, (rows, bw), np.uint8), (5, 5), 0)
+    half = max(1, round(config.line_width_m / view.xm_per_px / 2))
+    left, right = round(config.dst_left_x * bw), round(config.dst_right_x * bw)
+    asphalt[:, left - half : left + half + 1] = 235
+    along = np.arange(rows) * view.ym_per_px
+    dashed = (along % spacing_m) < dash_m
+    asphalt[dashed, right - half : right + half + 1] = 235
+    for k in range(frames):
+        top = rows - bh - round(k * step)  # the road slides down the view, towards the camera
+        part = np.dstack([asphalt[top : top + bh]] * 3)
+        frame = cv2.warpPerspective(part, view.inverse, (1280, 720), borderValue=(100, 100, 100))
+        yield np.asarray(frame, np.uint8)
 
 
 def chessboard_frames(

@@ -13,13 +13,14 @@ from numpy.typing import NDArray
 
 from app.evaluate import _lane_x, evaluate, load_labels
 from lanes.config import LaneConfig
+from lanes.dashes import DashTrack, near_ends
 from lanes.finder import LaneFinder
 from lanes.line import Line
 from lanes.measure import implausible_lane, radius_of_curvature
 from lanes.perspective import birdseye_for
 from lanes.search import LinePixels, fit_lane, fit_line, paint_between
 from lanes.threshold import lane_mask
-from tests.helpers import process_clip, raised_camera
+from tests.helpers import dashed_road, process_clip, raised_camera
 
 
 def _still(data_dir: Path, name: str) -> np.ndarray:
@@ -653,3 +654,47 @@ def test_a_lane_is_found_at_dusk(data_dir: Path) -> None:
         )
     }
     assert shares["relative"] >= 0.99 and shares["absolute"] == 0.0, shares
+
+
+def test_a_dashed_lines_dashes_are_joined_and_markers_passed_over() -> None:
+    """A line's painted rows (top: far; 0.125 m a row): a dash the mask broke in two counts as
+    one, a short run mid-gap (California's raised markers) and a dash cut by the view's top
+    are no dash, and a solid line is none either; each dash's near end is given."""
+    painted = np.zeros(216, bool)
+    painted[0:20] = True  # cut by the top
+    painted[40:52] = painted[56:64] = True  # one 3 m dash with a 0.5 m hole
+    painted[84:90] = True  # a 0.75 m marker
+    painted[120:144] = True  # a 3 m dash
+    painted[200:216] = True  # cut by the bottom: its near end is not in the view
+    ends = near_ends(painted, 0.125, bridge_m=1.5, length_m=(1.5, 7.0))
+    assert ends.tolist() == [64.0, 144.0]
+    assert len(near_ends(np.ones(216, bool), 0.125, 1.5, (1.5, 7.0))) == 0
+
+
+def test_a_dash_track_reads_the_spacing_the_road_carries_past() -> None:
+    """Dashes 15.85 m apart (in the view's metres) carried 1.1 m a frame towards the camera: as
+    each leaves the nearer part of the view, its distance from the one before is read, and a
+    frame without the road's motion starts the chain afresh."""
+    ym, rows, spacing, step = 0.125, 216, 15.85, 1.1
+    track, found = DashTrack(near=0.45), []
+    for k in range(80):
+        # The dashes' near ends, metres down the view (negative: not yet in it).
+        ends = np.array([k * step - j * spacing for j in range(12)]) / ym
+        ends = ends[(ends > 24) & (ends < rows - 1)]  # their dashes wholly inside
+        found += track.update(ends, rows, ym, step if k != 40 else None)
+    # 88 m driven: four dashes passed, the chain broken between the second and the third.
+    assert len(found) == 2 and np.allclose(found, spacing, atol=0.15), found
+    # Without the road's motion no dash is ever tied to the next.
+    assert DashTrack().update(np.array([150.0]), rows, ym, None) == []
+
+
+@pytest.mark.parametrize("spacing_m", [12.19, 15.85])
+def test_the_lane_stage_reads_a_dashed_lines_spacing(spacing_m: float) -> None:
+    """A synthetic road with a solid line and a dashed one, streaming 2 m a frame: the lane
+    stage reads the dashes' spacing (within 2 %, one reading a dash passed); the solid line
+    gives none."""
+    finder, found = LaneFinder(), list[float]()
+    for frame in dashed_road(100, spacing_m, 2.0):
+        found += finder.process(frame).dash_spacings
+    assert len(found) >= 100 * 2.0 / spacing_m - 5, found
+    assert np.allclose(found, spacing_m, rtol=0.02), found
