@@ -240,6 +240,8 @@ FRAME_COLUMNS = (
     ("monochrome", "bool"),  # read by the grey models (the record's monochrome)
     ("horizon_y", "double"),
     ("ground_scale", "double"),
+    ("length_scale", "double"),  # the road's length per metre of the view, from the dashes
+    ("dash_m", "double"),  # the lane dashes' spacing as the view read it (null: not read)
     ("rear", "bool"),  # a rear camera's frame (the record's facing)
     ("roll_deg", "double"),  # the turn the frame was levelled by (stated or read; 0: none)
     ("focal_mm", "double"),  # the lens's focal length where it gave the distances (null: none)
@@ -300,6 +302,8 @@ def write_table_parts(
             "monochrome": bool(r.get("monochrome")),
             "horizon_y": r.get("horizon_y"),
             "ground_scale": r.get("ground_scale"),
+            "length_scale": r.get("length_scale"),
+            "dash_m": r.get("dash_m"),
             "rear": seen_from_behind(r),
             "roll_deg": r.get("roll_deg", 0.0),
             "focal_mm": r.get("focal_mm"),

@@ -17,6 +17,7 @@ from app.errors import USER_ERRORS, InputError, Interrupted, describe
 from app.mounting import Mounting, check_mounting, check_roll
 from app.runtime import tune_process
 from camera_cal import (
+    US_DASH_SPACING_M,
     Calibration,
     calibrate,
     calibrate_frames,
@@ -131,6 +132,35 @@ FocalLengthOption = Annotated[
 ]
 
 
+DashSpacingOption = Annotated[
+    str | None,
+    typer.Option(
+        "--dash-spacing",
+        metavar="M|none",
+        help="The spacing of the lane dashes on the roads filmed, one dash and gap, in metres: "
+        "where the lens is not known (no --calibration FILE, --focal-length or phone's tag), "
+        "distances and speed follow the dashes (default: 12.19, US highways; the UK's "
+        "motorways 9, German autobahns 18); none: the lens is taken as the shipped camera's.",
+    ),
+]
+
+
+def _dash_spacing(value: str | None) -> float | None:
+    """The --dash-spacing option in metres (None: the dashes are not read); a value that is no
+    number is refused (the range is checked with the rest of the mounting)."""
+    if value is None:
+        return US_DASH_SPACING_M
+    if value.strip().lower() == "none":
+        return None
+    try:
+        return float(value)
+    except ValueError:
+        raise InputError(
+            f"--dash-spacing {value} is not a number of metres; give one (US highways 12.19) "
+            "or none"
+        ) from None
+
+
 def _mounting(
     horizon: float | None,
     camera_height: float | None,
@@ -139,6 +169,7 @@ def _mounting(
     facing: str,
     focal_length: float | None,
     calibration: str,
+    dash_spacing: str | None = None,
 ) -> Mounting:
     """The `Mounting` the options state; a focal length beside a calibration file is refused
     (the calibration holds the lens's own)."""
@@ -148,7 +179,15 @@ def _mounting(
             "calibration holds its focal length)"
         )
     keep_left = _keep_left(traffic)
-    return Mounting(horizon, camera_height, keep_left, roll, _facing(facing), focal_length)
+    return Mounting(
+        horizon,
+        camera_height,
+        keep_left,
+        roll,
+        _facing(facing),
+        focal_length,
+        _dash_spacing(dash_spacing),
+    )
 
 
 def _facing(facing: str) -> str:
@@ -345,6 +384,7 @@ def process_command(
     roll: RollOption = None,
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
+    dash_spacing: DashSpacingOption = None,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
@@ -354,7 +394,9 @@ def process_command(
     from app.sources import check_input, is_image
 
     check_input(source)
-    mounting = _mounting(horizon, camera_height, traffic, roll, facing, focal_length, calibration)
+    mounting = _mounting(
+        horizon, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
+    )
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     output, record = outputs.media, outputs.record
@@ -428,11 +470,14 @@ def batch_command(
     roll: RollOption = None,
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
+    dash_spacing: DashSpacingOption = None,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
     from app.batch import BatchOptions, find_inputs, run_batch, summary_line
 
-    mounting = _mounting(None, camera_height, traffic, roll, facing, focal_length, calibration)
+    mounting = _mounting(
+        None, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
+    )
     check_mounting(mounting)
     entries = find_inputs(inputs)
     if not entries:
@@ -472,6 +517,7 @@ def debug_command(
     roll: RollOption = None,
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
+    dash_spacing: DashSpacingOption = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -490,7 +536,7 @@ def debug_command(
         cal,
         *stages,
         mounting=_mounting(
-            horizon, camera_height, traffic, roll, facing, focal_length, calibration
+            horizon, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
         ),
     )
     written = run_debug(

@@ -202,7 +202,9 @@ def lens_for(
 ) -> tuple[Calibration | None, Mounting]:
     """The calibration and mounting for `name`'s frames of `size`: the lens's focal length its
     file's tag states (`tagged_mm`, a phone's) where the user stated none, the calibration that
-    fits (`calibration_for`), and `log` told of a lens known without one (`lens_note`)."""
+    fits (`calibration_for`), and `log` told of a lens known without one (`lens_note`); where
+    the lens is known (a calibration the user named, or a focal length), the lane dashes are
+    not read for the road's length (see `camera_cal.DashScale`)."""
     tagged = mounting.focal_mm is None and tagged_mm is not None
     if tagged:
         mounting = replace(mounting, focal_mm=tagged_mm)
@@ -211,6 +213,10 @@ def lens_for(
     # A calibration the user named sets the lens, whatever the tag says.
     if (lens := lens_note(mounting.focal_mm, tagged and calibration is None, dropped)) is not None:
         log(f"note: {name}: {lens}")
+    # A lens known, by a calibration of this camera or its focal length, gives the road's
+    # lengths: the dashes are read where it is assumed (the shipped camera's).
+    if mounting.focal_mm is not None or (required and calibration is not None):
+        mounting = replace(mounting, dash_spacing_m=None)
     return calibration, mounting
 
 
@@ -363,6 +369,8 @@ def process_video(
         height = pipeline.height_note(float(np.median(scales))) if scales else None
         if height is not None:
             log(f"note: {source.name}: {height}")
+        if (dashes := pipeline.dash_note()) is not None:
+            log(f"note: {source.name}: {dashes}")
         events = tuple(pipeline.finish_events())
         if events_file is not None:
             event_sink = sinks.enter_context(RecordSink(events_file))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -124,6 +124,27 @@ class FrameFacts:
     # `mirrored`: its file saved mirrored, as a rear-view mirror shows the road (stated only).
     rear: bool = False
     mirrored: bool = False
+    # The road's length per metre of the bird's-eye view (`DashScale`): distances and speeds
+    # above are scaled by it; the lane dashes' spacing as the view read it (None: not read).
+    length_scale: float = 1.0
+    dash_m: float | None = None
+
+    def scaled(self, length_scale: float, dash_m: float | None) -> FrameFacts:
+        """These facts, read in the view's metres, with the road's lengths `length_scale` times
+        as long: distances, closing speeds and our speed scale; headway and time to collision
+        (a distance over a speed) do not."""
+        vehicles = tuple(
+            replace(
+                v,
+                distance_m=v.distance_m * length_scale,
+                closing_mps=None if v.closing_mps is None else v.closing_mps * length_scale,
+            )
+            for v in self.vehicles
+        )
+        speed = None if self.speed_kmh is None else self.speed_kmh * length_scale
+        return replace(
+            self, speed_kmh=speed, vehicles=vehicles, length_scale=length_scale, dash_m=dash_m
+        )
 
 
 class Facing:

@@ -1,8 +1,8 @@
 """What the user says of how the camera is mounted, and the checks that it is a dashcam's.
 
 Each value takes the place of what the footage or the tuned camera would give; the CLI builds
-one `Mounting` from `--horizon`, `--camera-height`, `--traffic`, `--roll`, `--facing` and
-`--focal-length`, and the pipeline reads it (app/pipeline.py).
+one `Mounting` from `--horizon`, `--camera-height`, `--traffic`, `--roll`, `--facing`,
+`--focal-length` and `--dash-spacing`, and the pipeline reads it (app/pipeline.py).
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 
 from app.errors import InputError
 from app.sources import VideoInfo, reduced_row
+from camera_cal import US_DASH_SPACING_M
 
 
 @dataclass(frozen=True)
@@ -26,7 +27,9 @@ class Mounting:
     swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one saved mirrored,
     as a rear-view mirror shows the road, its writing backwards and its sides as ahead), and
     the lens's focal length in 35 mm terms (None: the shipped camera's; sets the distances of a
-    camera without a calibration, see `camera_cal.undistort.focal_scale_height`)."""
+    camera without a calibration, see `camera_cal.undistort.focal_scale_height`), and the
+    spacing of the lane dashes on the roads it films, in metres, from which the road's length
+    scale is read where the lens is not known (`app.facts.DashScale`; None: not read)."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None
@@ -34,6 +37,7 @@ class Mounting:
     roll_deg: float | None = None
     facing: str = "auto"
     focal_mm: float | None = None
+    dash_spacing_m: float | None = US_DASH_SPACING_M
 
     @property
     def rear(self) -> bool | None:
@@ -95,6 +99,35 @@ def camera_height_note(
     )
 
 
+def dash_note(
+    length_scale: float, read_m: float | None, implausible_m: float | None, spacing_m: float
+) -> str | None:
+    """What a user should hear where the lane dashes, `spacing_m` apart on the road, moved the
+    road's `length_scale` (the view read them `read_m` apart), or read `implausible_m` apart, too
+    far from it for any lens: the distances and speed then assume the shipped camera's lens.
+    None where the scale stayed 1 and the dashes agreed with it (or were not read)."""
+    painted = f"{spacing_m:g} m apart" + (
+        " (as on US highways; --dash-spacing M for other roads')"
+        if spacing_m == US_DASH_SPACING_M
+        else " (--dash-spacing)"
+    )
+    if implausible_m is not None:
+        return (
+            f"its lane dashes read {implausible_m:.1f} m apart, too far from {painted} for any "
+            "lens, so its distances and speed assume the shipped camera's lens (--focal-length MM "
+            "states its own)"
+        )
+    if length_scale == 1.0 or read_m is None:
+        return None
+    return (
+        f"its lane dashes read {read_m:.1f} m apart where they are painted {painted}, so its "
+        f"lens is taken as {max(length_scale, 1 / length_scale):.2f} times "
+        f"{'wider' if length_scale < 1 else 'narrower'} than assumed: its distances and speed "
+        f"are scaled by {length_scale:.2f} from the frame they were read on (--dash-spacing none "
+        "keeps the assumed lens; --focal-length MM states its own)"
+    )
+
+
 # How far a user may say the picture is turned, in degrees: a dashcam mounted askew, not one
 # on its side (a phone held upright is turned by its rotation tag).
 MAX_ROLL_DEG = 30.0
@@ -125,6 +158,22 @@ def check_focal_length(focal_mm: float | None) -> None:
         )
 
 
+# Lane dash spacings a user may state, one dash and one gap, in metres (the UK's motorways 9,
+# US highways 12.19, German autobahns 18, Japan's expressways 20).
+DASH_SPACINGS_M = (3.0, 60.0)
+
+
+def check_dash_spacing(spacing_m: float | None) -> None:
+    """A user's dash spacing must be one a road's paint can have (None: not read)."""
+    low, high = DASH_SPACINGS_M
+    if spacing_m is not None and not low <= spacing_m <= high:
+        raise InputError(
+            f"--dash-spacing {spacing_m:g} m is not a lane's dash spacing; pass the metres from "
+            f"one dash's start to the next one's, from {low:g} to {high:g} (US highways 12.19), "
+            "or none"
+        )
+
+
 def check_horizon(horizon_y: float | None, size: tuple[int, int]) -> None:
     """A user's horizon row must lie inside the frame."""
     if horizon_y is not None and not 0 <= horizon_y < size[1]:
@@ -143,6 +192,7 @@ def check_mounting(mounting: Mounting, size: tuple[int, int] | None = None) -> N
     check_roll(mounting.roll_deg)
     check_facing(mounting.facing)
     check_focal_length(mounting.focal_mm)
+    check_dash_spacing(mounting.dash_spacing_m)
 
 
 def video_mounting(mounting: Mounting, info: VideoInfo) -> Mounting:

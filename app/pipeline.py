@@ -22,13 +22,14 @@ from numpy.typing import NDArray
 from app.errors import FrameSizeChanged
 from app.events import Event, EventDetector, FrameSignals
 from app.facts import FactsTracker, FrameFacts, RoadGeometry
-from app.mounting import Mounting, camera_height_note
+from app.mounting import Mounting, camera_height_note, dash_note
 from app.sources import Frame
 from app.stages import FrameStage
 from app.traffic import KeepLeft
 from app.workers import StageWorker
 from camera_cal import (
     Calibration,
+    DashScale,
     GroundScale,
     RollReading,
     SceneGeometry,
@@ -106,6 +107,18 @@ class _Started:
     # The warp of this frame's metres (`Pipeline._view`; with the worker, the next frame is
     # started before this one finishes, and at a cut its warp is another scene's).
     view: BirdsEye | None = None
+    # The road's length scale and the dash spacing read as of this frame (`SceneTracker.length`).
+    length: tuple[float, float | None] = (1.0, None)
+
+
+def lengthened(lane: LaneResult | None, length_scale: float) -> LaneResult | None:
+    """The lane stage's result with its radius of curvature on a road `length_scale` times as
+    long as its view reads (the lines' offset across it kept, a bend x = y^2 / 2R reads R
+    times the scale squared)."""
+    if length_scale == 1.0 or lane is None or lane.lane is None:
+        return lane
+    radius = lane.lane.curvature_m * length_scale**2
+    return replace(lane, lane=replace(lane.lane, curvature_m=radius))
 
 
 class Pipeline:
@@ -266,6 +279,14 @@ class Pipeline:
         tuned = RoadGeometry.of(self.lanes.view(self.size)).camera_height_m
         return camera_height_note(ground_scale, tuned, self.lanes.config.lane_width_m)
 
+    def dash_note(self) -> str | None:
+        """What a user should hear of the road's length read off the lane dashes of the last
+        shot (see `app.mounting.dash_note`), or None."""
+        dashes = None if self._scene is None else self._scene.dashes
+        if dashes is None:
+            return None
+        return dash_note(dashes.value, dashes.read_m, dashes.implausible_m, dashes.spacing_m)
+
     def horizon_note(self) -> str | None:
         """What a user should hear when an unknown camera's footage never showed its horizon:
         after waiting for it, the stages placed their work by the tuned camera's (None: it was
@@ -358,7 +379,14 @@ class Pipeline:
                 and tuple(self.calibration.image_size) == tuple(size),
                 confirm=max(3, round(0.2 * (fps or 25))),
             ),
+            dashes=None if (spacing := self._dash_spacing) is None else DashScale(spacing),
         )
+
+    @property
+    def _dash_spacing(self) -> float | None:
+        """The lane dashes' spacing the road's length scale is read from (the mounting's; None:
+        not read, as without the lane stage, which reads the dashes)."""
+        return self.mounting.dash_spacing_m if self.lanes is not None else None
 
     def _scene_after_cut(self, frame: Frame, ended: SceneTracker) -> SceneTracker:
         """The scene tracker of the shot the footage cut to at `frame`: the shot's that ended,
@@ -475,6 +503,7 @@ class Pipeline:
             )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
+            self._scene.observe_dashes(lane.dash_spacings)
         return _Started(
             undistorted,
             scene,
@@ -485,6 +514,7 @@ class Pipeline:
             cut=cut,
             roll_deg=self._roll,
             view=self._view(placement),
+            length=self._scene.length,
         )
 
     def _view(self, placement: dict[str, Any]) -> BirdsEye | None:
@@ -588,7 +618,8 @@ class Pipeline:
                 lane.lane if lane is not None else None,
                 lane.advance_m if lane is not None else None,
                 self._geometry,
-            )
+            ).scaled(*started.length)
+        lane = lengthened(lane, started.length[0])
         events: tuple[Event, ...] = ()
         if self._fps > 0:  # events need time: not for a still
             estimate = lane.lane if lane is not None else None

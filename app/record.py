@@ -98,6 +98,9 @@ def frame_record(
     if result.lane is not None:
         record["lane"] = lane_record(result.lane.lane)
         record["speed_kmh"] = _rounded(facts.speed_kmh, 1) if facts is not None else None
+        if facts is not None:
+            record["length_scale"] = round(facts.length_scale, 3)
+            record["dash_m"] = _rounded(facts.dash_m, 2)
         if facts is not None and facts.rear:
             record["facing"] = "rear-mirrored" if facts.mirrored else "rear"
     return record

@@ -13,6 +13,8 @@ from camera_cal.calibration import (
 )
 from camera_cal.level import LevelConfig, RollReading
 from camera_cal.scene import (
+    US_DASH_SPACING_M,
+    DashScale,
     GroundScale,
     SceneGeometry,
     SceneTracker,
@@ -31,9 +33,11 @@ from camera_cal.undistort import (
 )
 
 __all__ = [
+    "US_DASH_SPACING_M",
     "Calibration",
     "CalibrationError",
     "CalibrationMismatch",
+    "DashScale",
     "GroundScale",
     "LevelConfig",
     "RollReading",

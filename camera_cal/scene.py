@@ -306,6 +306,79 @@ class GroundScale:
         return self.value
 
 
+# The spacing of US highways' lane dashes: a 10 ft dash and a 30 ft gap.
+US_DASH_SPACING_M = 12.19
+
+
+class DashScale:
+    """History for the road's length scale from the lane dashes' spacings, each as the bird's-
+    eye view read it (the lane stage's `dash_spacings`): the view's metres are right only for
+    the lens it assumes, and a flat road does not show the lens's focal length otherwise (a
+    longer lens on a stretched road gives the same picture; see the README's Facts).
+
+    Of the last `window` spacings within `span` metres, once `least` are in: their median, then
+    twice the median of those within `near` of it (a dash missed reads twice the spacing, a dash
+    the mask broke less than half); read where `agree` of them are that near. The scale is the
+    road's `spacing_m` over it, and moves there when it is off the current one by more than
+    `tolerance` (once moved off 1, by more than `follow`: the lens is then known to differ, and
+    the spacing read settles as more dashes come in) and within `plausible` (a lens 2.2 times
+    wider than assumed to 1.4 times longer): the shipped camera's clips read their dashes
+    within 5 % of 12.19 m, so its scale stays 1; outside, the dashes are taken for another
+    road's (`implausible_m` keeps the spacing for a note)."""
+
+    def __init__(
+        self,
+        spacing_m: float = US_DASH_SPACING_M,
+        least: int = 30,
+        window: int = 200,
+        span: tuple[float, float] = (4.0, 40.0),
+        near: float = 0.2,
+        agree: float = 0.5,
+        tolerance: float = 0.15,
+        follow: float = 0.05,
+        plausible: tuple[float, float] = (0.45, 1.4),
+    ) -> None:
+        self.spacing_m = spacing_m
+        self.follow = follow
+        self.least = least
+        self.span = span
+        self.near = near
+        self.agree = agree
+        self.tolerance = tolerance
+        self.plausible = plausible
+        self._spacings: deque[float] = deque(maxlen=window)
+        self.value = 1.0
+        self.read_m: float | None = None  # the spacing the view reads, once it agrees
+        self.implausible_m: float | None = None
+
+    def add(self, spacings: tuple[float, ...] | list[float]) -> float:
+        """Take in one frame's spacings (metres of the view); the scale as of them."""
+        low, high = self.span
+        kept = [s for s in spacings if low <= s <= high]
+        if not kept:
+            return self.value
+        self._spacings.extend(kept)
+        if len(self._spacings) < self.least:
+            return self.value
+        every = np.asarray(self._spacings)
+        read = float(np.median(every))
+        close = every
+        for _ in range(2):
+            close = every[np.abs(every / read - 1) <= self.near]
+            read = float(np.median(close)) if len(close) else read
+        if len(close) < self.agree * len(every):
+            return self.value
+        self.read_m = read
+        scale = self.spacing_m / read
+        if abs(scale / self.value - 1) <= (self.tolerance if self.value == 1 else self.follow):
+            return self.value
+        if self.plausible[0] <= scale <= self.plausible[1]:
+            self.value, self.implausible_m = round(scale, 3), None
+        else:
+            self.implausible_m = read
+        return self.value
+
+
 class SceneTracker:
     """History for the scene geometry: the brightest value seen per row and column (for the
     bars), each row's change between frames `motion_every` apart (for a bonnet), the edges of
@@ -323,10 +396,12 @@ class SceneTracker:
     moves it by a few per cent; a camera turned sideways by more).
     `fixed_scale` is the scale height of a calibrated lens; without it the live box gives it.
     The ground scale is learned from the lane stage's width samples (`observe_lane_width`;
-    `ground` sets how). Every `light_every` frames the road's grey level and grain are sampled
-    (their medians over `light_window` samples), and whether the live picture has colour: it is
-    monochrome once `colour_samples` samples in a row had none (a camera switching to infrared
-    at night is read so a fraction of a second after; one sample with colour ends it).
+    `ground` sets how), the road's length scale from its dash spacings (`observe_dashes`;
+    `dashes` sets how, None: not read). Every `light_every` frames the road's grey level and
+    grain are sampled (their medians over `light_window` samples), and whether the live
+    picture has colour: it is monochrome once `colour_samples` samples in a row had none (a
+    camera switching to infrared at night is read so a fraction of a second after; one sample
+    with colour ends it).
     """
 
     def __init__(
@@ -350,10 +425,12 @@ class SceneTracker:
         colour_samples: int = 3,
         full_size_first: bool = False,
         weak_edges: float = 0.6,
+        dashes: DashScale | None = None,
     ) -> None:
         self.size = size
         self.weak_edges = weak_edges
         self.ground = ground if ground is not None else GroundScale()
+        self.dashes = dashes
         self.fixed_scale = fixed_scale
         self.default_horizon = default_horizon
         self.full_size_first = full_size_first
@@ -539,6 +616,19 @@ class SceneTracker:
         """Take in the lane stage's width sample of the last frame (None: none measured) and
         whether the lane finder believed that lane."""
         self.ground.add(sample, believed)
+
+    def observe_dashes(self, spacings: tuple[float, ...]) -> None:
+        """Take in the dash spacings the lane stage completed in the last frame."""
+        if self.dashes is not None:
+            self.dashes.add(spacings)
+
+    @property
+    def length(self) -> tuple[float, float | None]:
+        """The road's length scale and the dash spacing the view reads (see `DashScale`): 1 and
+        None where the dashes are not read."""
+        if self.dashes is None:
+            return 1.0, None
+        return self.dashes.value, self.dashes.read_m
 
     @property
     def lane_width_known(self) -> bool:

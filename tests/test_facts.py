@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -18,7 +19,7 @@ from lanes.finder import LaneFinder
 from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.threshold import lane_mask
-from tests.helpers import moving_road, process_clip
+from tests.helpers import dashed_road, moving_road, process_clip, read_record, run_cli
 from vehicles.detections import Detections
 
 DASH_PERIOD_M = 12.19  # US highways: a 10 ft dash and a 30 ft gap
@@ -430,3 +431,89 @@ def test_trimmed_mean_equals_scipy() -> None:
     for n in (1, 2, 5, 14, 15):
         values = rng.normal(8.0, 1.0, n)
         assert trimmed_mean(values, 0.2) == pytest.approx(trim_mean(values, 0.2))
+
+
+def test_distances_and_speed_follow_the_lane_dashes_of_a_lens_not_known() -> None:
+    """A synthetic road whose dashes the view reads 15.85 m apart (a lens 1.3 times wider than
+    assumed: US dashes are 12.19 m apart) streaming 2 m of the view a frame: once 30 dashes
+    passed, the road's length scale is 12.19 / 15.85 and the speed and the lane's radius are
+    scaled by it (headway and time to collision, a distance over a speed, are not). Dashes
+    12.19 m apart leave it at 1, and so does `--dash-spacing none`."""
+    from app.mounting import Mounting
+    from app.pipeline import Pipeline
+
+    horizon = LaneFinder().view((1280, 720)).horizon_y
+
+    def scales_and_speeds(spacing_m: float, stated: float | None) -> list[tuple[float, float]]:
+        pipeline = Pipeline(
+            None, LaneFinder(), None, mounting=Mounting(horizon, dash_spacing_m=stated)
+        )
+        pipeline.prepare((1280, 720), 25.0)
+        seen: list[tuple[float, float]] = []
+        for frame in dashed_road(280, spacing_m, 2.0):
+            result = pipeline.run(frame).result
+            assert result.facts is not None
+            seen.append((result.facts.length_scale, result.facts.speed_kmh or 0.0))
+        return seen
+
+    truth = 2.0 * 25 * 3.6  # km/h as the view reads the road
+    wide = scales_and_speeds(15.85, 12.19)
+    assert wide[0][0] == 1.0 and wide[-1][0] == pytest.approx(12.19 / 15.85, rel=0.03)
+    assert wide[-1][1] == pytest.approx(truth * wide[-1][0], rel=0.03)
+    assert all(scale == 1.0 for scale, _ in scales_and_speeds(15.85, None))
+    assert all(scale == 1.0 for scale, _ in scales_and_speeds(12.19, 12.19))
+
+
+def test_a_longer_road_scales_distances_speeds_and_radius_but_not_times() -> None:
+    """A road `length_scale` times as long as the view reads it: every distance, closing speed
+    and our speed scale by it, the lane's radius by its square (a bend x = y^2 / 2R keeps its
+    offset across), and headway and time to collision (a distance over a speed) stay."""
+    from app.facts import FrameFacts, VehicleFacts
+    from app.pipeline import lengthened
+    from lanes.finder import LaneEstimate, LaneResult
+
+    facts = FrameFacts(100.0, (VehicleFacts(1, 20.0, 1.5, "ego", 2.0),), 0.72, 10.0, 1)
+    scaled = facts.scaled(0.8, 15.2)
+    assert scaled.speed_kmh == pytest.approx(80.0) and scaled.vehicles[0].distance_m == 16.0
+    assert scaled.vehicles[0].closing_mps == pytest.approx(1.6)
+    assert scaled.vehicles[0].lateral_m == 1.5 and scaled.vehicles[0].lane == "ego"
+    assert (scaled.headway_s, scaled.ttc_s) == (0.72, 10.0)
+    assert (scaled.length_scale, scaled.dash_m) == (0.8, 15.2)
+    assert facts.scaled(1.0, None) == replace(facts, dash_m=None)
+    fit = np.array([1e-4, 0.0, 100.0])
+    lane = LaneEstimate(np.zeros((2, 2)), np.zeros((2, 2)), 1000.0, 0.3, fit, fit, 3.7)
+    longer = lengthened(LaneResult(lane), 0.8)
+    assert longer is not None and longer.lane is not None
+    assert longer.lane.curvature_m == pytest.approx(640.0) and longer.lane.offset_m == 0.3
+    result = LaneResult(lane)
+    assert lengthened(result, 1.0) is result
+
+
+@pytest.mark.slow
+def test_la_reads_its_wider_lens_off_its_dashes_and_us_winter_keeps_the_shipped_one(
+    wild_dir: Path, tmp_path: Path
+) -> None:
+    """The LA clip's dashcam (no calibration) has a wider lens than the shipped one: its
+    dashes, 12.19 m apart on a US freeway, read about 15.5 m apart in the view, and its speed
+    read 105-110 km/h where they pass every 15-16 frames at 30 fps (85 km/h). Once read, its
+    length scale is 0.75-0.85 and its speed at the end 75-95 km/h, and `process` says so. US
+    winter's dashes read within 10 % of 12.19 m: its scale stays 1 throughout."""
+    record = tmp_path / "la.jsonl"
+    result = run_cli(
+        "process", wild_dir / "la_freeway_minidashcam_2.mp4", "-o", tmp_path / "la.mp4",
+        "--json", record, "--calibration", "none", "--no-vehicles",
+    )  # fmt: skip
+    assert result.returncode == 0 and "lane dashes read 15." in result.stderr, result.stderr
+    assert "wider than assumed" in result.stderr and "--dash-spacing" in result.stderr
+    la = read_record(record)
+    scales = [r["length_scale"] for r in la]
+    assert scales[0] == 1.0 and 0.75 <= scales[-1] <= 0.85, scales[-1]
+    assert 14.0 <= la[-1]["dash_m"] <= 17.0, la[-1]["dash_m"]
+    end = [r["speed_kmh"] for r in la[-30:] if r["speed_kmh"] is not None]
+    assert len(end) >= 20 and 75 <= float(np.median(end)) <= 95, end
+    winter = process_clip(
+        wild_dir / "us_highway_winter.mp4", tmp_path, "--calibration", "none", "--no-vehicles"
+    )
+    assert {r["length_scale"] for r in winter} == {1.0}
+    read = [r["dash_m"] for r in winter if r["dash_m"] is not None]
+    assert read and all(abs(m / 12.19 - 1) <= 0.1 for m in read), read

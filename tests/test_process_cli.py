@@ -580,3 +580,41 @@ def test_a_stills_exif_focal_length_sets_its_scale(data_dir: Path, tmp_path: Pat
     assumed, said = run(plain, "--calibration", "none")
     assert "35 mm" not in said and len(assumed) == len(read)
     assert all(r < a for r, a in zip(sorted(read), sorted(assumed), strict=True)), (read, assumed)
+
+
+def test_the_dashes_are_read_only_where_the_lens_is_not_known(
+    test_video: Path, tmp_path: Path
+) -> None:
+    """The lane dashes give the road's length where the lens is assumed (the shipped camera's,
+    its calibration applied by default, or none): not where a calibration the user named, a
+    stated focal length or a phone's tag gives it, nor with `--dash-spacing none`. A spacing
+    that is no number, or none a road has, is refused in one line; the record carries the
+    scale and the spacing read (1 and null on a clip too short to read them)."""
+    from app.drivers import lens_for
+    from app.mounting import Mounting
+    from camera_cal import default_calibration_path, load_calibration
+
+    shipped = load_calibration(default_calibration_path())
+
+    def read(calibration: Any, mounting: Mounting, tag: float | None, named: bool) -> Any:
+        _, used = lens_for(calibration, mounting, (1280, 720), tag, "x", named, lambda m: None)
+        return used.dash_spacing_m
+
+    assert read(shipped, Mounting(), None, False) == 12.19  # the shipped lens, assumed
+    assert read(None, Mounting(), None, True) == 12.19  # --calibration none
+    assert read(None, Mounting(dash_spacing_m=9.0), None, True) == 9.0
+    assert read(shipped, Mounting(), None, True) is None  # --calibration FILE
+    assert read(shipped, Mounting(focal_mm=26.0), None, False) is None  # --focal-length
+    assert read(shipped, Mounting(), 26.0, False) is None  # a phone's tag
+    out = tmp_path / "o.mp4"
+    for value, fragment in (("abc", "not a number"), ("100", "not a lane's dash spacing")):
+        bad = run_cli("process", test_video, "-o", out, "--dash-spacing", value)
+        assert_one_line_error(bad, f"--dash-spacing {value}", fragment)
+        assert not out.exists()
+    record = tmp_path / "r.jsonl"
+    for option in ("none", "9"):
+        result = run_cli("process", test_video, "-o", out, "--json", record, "--no-vehicles",
+                         "--dash-spacing", option)  # fmt: skip
+        assert result.returncode == 0, result.stderr
+        rows = read_record(record)
+        assert {(r["length_scale"], r["dash_m"]) for r in rows} == {(1.0, None)}

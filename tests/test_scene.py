@@ -11,6 +11,7 @@ import pytest
 
 from app.sources import probe_video, read_frames
 from camera_cal.scene import (
+    DashScale,
     GroundScale,
     SceneGeometry,
     SceneTracker,
@@ -269,6 +270,36 @@ def test_the_ground_scale_moves_only_where_the_tuned_one_fails() -> None:
     assert {found.add(v, k % 3 > 0) for k, v in enumerate(higher)} == {1.0}  # 2/3 believed
     lower = GroundScale(least=20, window=40, plausible=(0.7, 1.5), believed=0.5)
     assert [lower.add(v * 2.6) for v in higher][-1] == pytest.approx(1.625, abs=0.01)
+
+
+def test_the_road_length_follows_the_dashes_only_where_they_read_another_lens() -> None:
+    """Nothing before `least` spacings; then their spacing (the median near the median: a dash
+    missed reads twice, a broken one half, and both are left out) moves the scale where it is
+    more than 15 % off 12.19 m and within a lens's reach, and then follows it within 5 %.
+    Spacings 4 % off (the shipped camera's clips read theirs 0.96-1.04 of it) keep it at 1; a
+    spacing no lens explains (India's 4.9 m) keeps it too, for the note; readings that do not
+    agree read nothing."""
+    rng = np.random.default_rng(0)
+    wide = list(15.85 * (1 + 0.05 * rng.standard_normal(60)))  # a lens 1.3 times wider
+    junk = [31.7, 7.0, 2.5, 33.0, 6.1]  # a dash missed, a dash broken, a marker (out of span)
+    scale = DashScale(least=30)
+    assert {scale.add(wide[k : k + 2]) for k in range(0, 28, 2)} == {1.0}
+    assert scale.read_m is None
+    assert scale.add(wide[28:30] + junk) == pytest.approx(12.19 / 15.85, rel=0.03)
+    assert scale.read_m == pytest.approx(15.85, rel=0.03)
+    moved = scale.value
+    assert scale.add([15.85 * 1.02] * 5) == moved  # within 5 %: as it was
+    assert scale.add([15.85 * 1.15] * 120) == pytest.approx(12.19 / (15.85 * 1.15), rel=0.03)
+    assert scale.add([]) == scale.value  # a frame without spacings changes nothing
+    near = DashScale(least=30)
+    assert {near.add([12.19 * f]) for f in np.linspace(0.96, 1.04, 80)} == {1.0}
+    assert near.read_m == pytest.approx(12.19, rel=0.01)
+    india = DashScale(least=30)
+    assert {india.add([4.9 + 0.1 * (k % 3)]) for k in range(60)} == {1.0}
+    assert india.implausible_m == pytest.approx(5.0, abs=0.1)
+    scattered = DashScale(least=30)
+    assert {scattered.add([s]) for s in rng.uniform(4, 40, 80)} == {1.0}
+    assert scattered.read_m is None
 
 
 def test_a_lane_width_is_known_once_measured_at_the_scale() -> None:
