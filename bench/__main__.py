@@ -29,8 +29,10 @@ from app.reframe import (
     UNTOLD_ROLL_FRAMINGS,
     WIDE_LENS_FRAMING,
     Framing,
+    distance_ratios,
     dusk_framings,
     framing_table,
+    speed_ratios,
     standard_framings,
     tagged_lens_framing,
     upright_framing,
@@ -308,6 +310,46 @@ def grainy_scores(data: Path) -> dict[str, dict[str, float]]:
     return table
 
 
+def dash_lens(data: Path) -> dict[str, float]:
+    """The 50 s clip (the shared clips in turn, undistorted) and the same through a lens 1.25
+    times longer (the narrower view), both untold (`--calibration none`): the narrower copy's
+    distances and speed against the clip's own before and after its lane dashes moved its
+    road's length scale (`camera_cal.DashScale`), the frame where, and the scales and dash
+    spacings both ended with."""
+    calibration = load_calibration(default_calibration_path())
+    narrow = next(f for f in standard_framings((1280, 720)) if f.name == "narrower view")
+    with tempfile.TemporaryDirectory() as tmp:
+        long = joined_clip(data, Path(tmp) / "long.mp4", frames=1250)
+        records = []
+        for framing in (Framing("as is"), narrow):
+            copy, record = Path(tmp) / "copy.mp4", Path(tmp) / "copy.jsonl"
+            write_reframed(long, framing, copy, calibration)
+            command = [sys.executable, "-m", "app", "process", str(copy), "-o", f"{tmp}/o.mp4"]
+            command += ["--json", str(record), "--calibration", "none"]
+            subprocess.run(command, check=True, capture_output=True)
+            records.append(list(read_record(record)))
+    reference, rows = records
+    moved = next(k for k, r in enumerate(rows) if r.get("length_scale", 1.0) != 1.0)
+
+    def ratios(lo: int, hi: int) -> tuple[float, float]:
+        distances = distance_ratios(reference[lo:hi], rows[lo:hi], narrow, (1280, 720))
+        speeds = speed_ratios(reference[lo:hi], rows[lo:hi], narrow)
+        return float(np.median(distances)), float(np.median(speeds))
+
+    (d0, s0), (d1, s1) = ratios(0, moved), ratios(moved, len(rows))
+    return {
+        "moved_at_s": moved / 25.0,
+        "length_scale": rows[-1]["length_scale"],
+        "dash_m": rows[-1]["dash_m"],
+        "reference_length_scale": reference[-1]["length_scale"],
+        "reference_dash_m": reference[-1]["dash_m"],
+        "distances_before": d0,
+        "speed_before": s0,
+        "distances_after": d1,
+        "speed_after": s1,
+    }
+
+
 def quality(data: Path, report: dict[str, Any]) -> None:
     """The quality tables, printed and put in `report`: the re-framed clips and sensor grain
     (deterministic, so they can be run apart from the speed figures on a busy machine)."""
@@ -339,6 +381,15 @@ def quality(data: Path, report: dict[str, Any]) -> None:
             + (f"  distances x{row['distance_ratio']:.3f}" if "distance_ratio" in row else "")
             + (f"  speed x{row['speed_ratio']:.3f}" if "speed_ratio" in row else "")
         )
+    lens = report["dash_lens"] = dash_lens(data)
+    print(
+        "the 50 s clip through a lens 1.25 times longer, untold: its dashes read "
+        f"{lens['dash_m']:.2f} m apart (the clip's own {lens['reference_dash_m']:.2f}, its scale "
+        f"{lens['reference_length_scale']:.3f}), the road's length scale {lens['length_scale']:.3f}"
+        f" from {lens['moved_at_s']:.1f} s; distances x{lens['distances_before']:.3f} -> "
+        f"x{lens['distances_after']:.3f}, speed x{lens['speed_before']:.3f} -> "
+        f"x{lens['speed_after']:.3f} of the clip's"
+    )
     report["grainy"] = grainy_scores(data)
     print("sensor grain (ffmpeg noise, x264 CRF 18), pooled over the three clips, IoU 0.5:")
     for name, row in report["grainy"].items():

@@ -351,6 +351,11 @@ class DashScale:
         self.read_m: float | None = None  # the spacing the view reads, once it agrees
         self.implausible_m: float | None = None
 
+    def reset(self) -> None:
+        """Forget the spacings read and the scale (the view's metres changed)."""
+        self._spacings.clear()
+        self.value, self.read_m, self.implausible_m = 1.0, None, None
+
     def add(self, spacings: tuple[float, ...] | list[float]) -> float:
         """Take in one frame's spacings (metres of the view); the scale as of them."""
         low, high = self.span
@@ -614,8 +619,11 @@ class SceneTracker:
 
     def observe_lane_width(self, sample: float | None, believed: bool = False) -> None:
         """Take in the lane stage's width sample of the last frame (None: none measured) and
-        whether the lane finder believed that lane."""
-        self.ground.add(sample, believed)
+        whether the lane finder believed that lane. Where it moves the ground scale, the view's
+        metres change with it, and the road's length is read afresh."""
+        before = self.ground.value
+        if self.ground.add(sample, believed) != before and self.dashes is not None:
+            self.dashes.reset()
 
     def observe_dashes(self, spacings: tuple[float, ...]) -> None:
         """Take in the dash spacings the lane stage completed in the last frame."""
