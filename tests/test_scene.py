@@ -302,6 +302,24 @@ def test_the_road_length_follows_the_dashes_only_where_they_read_another_lens() 
     assert scattered.read_m is None
 
 
+def test_a_ground_scale_that_moves_reads_the_dashes_afresh() -> None:
+    """The view's metres change with the ground scale (a higher camera's view covers more road),
+    so the dash spacings read before it moved, and the scale they gave, are forgotten."""
+    scene = SceneTracker(
+        (1280, 720), 420.0, ground=GroundScale(least=5, window=10), dashes=DashScale(least=30)
+    )
+    for _ in range(30):
+        scene.observe_dashes((15.85,))
+    scale, read = scene.length
+    assert scale == pytest.approx(12.19 / 15.85, rel=0.01) and read == 15.85
+    for _ in range(4):
+        scene.observe_lane_width(1.0)  # the tuned width: the ground scale stays
+    assert scene.length[1] == 15.85
+    for _ in range(10):
+        scene.observe_lane_width(0.6)  # a higher camera: the ground scale moves
+    assert scene.ground.value == 0.6 and scene.length == (1.0, None)
+
+
 def test_a_lane_width_is_known_once_measured_at_the_scale() -> None:
     """A side made up at the standard width needs the lanes' width in pixels: known from the
     start where it is `assumed` (a camera calibrated at the frames' size), else once `confirm`
