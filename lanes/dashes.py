@@ -3,8 +3,8 @@
 A dashed line repeats a dash and a gap at a fixed spacing along the road (12.19 m on US
 highways: a 10 ft dash, a 30 ft gap). The distance the road's motion says we drove between two
 dashes' near ends passing the nearer part of the bird's-eye view reads that spacing in the
-view's metres, which are right only for the lens the view assumes: the app compares the two to
-scale its distances and speed where the lens is not known (`app.facts.DashScale`). Read in one
+view's metres, which are right only for the lens the view assumes: the scene compares the two
+to scale the distances and speed where the lens is not known (`camera_cal.DashScale`). Read in one
 frame instead, from one dash to the next, the spacing depends on the far part of the view,
 where a horizon a few rows off stretches the road: test_video's read 12-15 m frame to frame.
 """
@@ -61,8 +61,9 @@ class DashTrack:
     distance down the view less the distance driven so far (the road's advances summed) stays
     put for one dash, and an observation within `same_m` of a dash's joins it. A dash that
     leaves that part is closed at the median of its places; the distance from the dash closed
-    before it (the one nearer the camera) is one spacing. A frame without the road's motion
-    breaks the chain (the next spacing starts afresh)."""
+    before it is one spacing (the one nearer the camera, or under a rear camera, whose road
+    moves away, the one farther). A frame without the road's motion breaks the chain (the next
+    spacing starts afresh)."""
 
     def __init__(self, near: float = 0.45, same_m: float = 1.5, least: int = 2) -> None:
         self.near = near
@@ -97,17 +98,18 @@ class DashTrack:
                 kept.append(match)
             match.append(place)
         spacings: list[float] = []
-        # Dashes not seen this frame left the nearer part (or were lost): nearest first.
+        # Dashes not seen this frame left the nearer part (or were lost), in the order they
+        # passed: the nearest first where the road comes towards the camera.
         gone = sorted(
             (d for d in self._open if not any(d is k for k in kept)),
-            key=lambda d: -float(np.median(d)),
+            key=lambda d: -float(np.median(d)) * (1 if advance_m >= 0 else -1),
         )
         for dash in gone:
             if len(dash) < self.least:
                 continue
             place = float(np.median(dash))
-            if self._last is not None and self._last > place:
-                spacings.append(self._last - place)
+            if self._last is not None and self._last != place:
+                spacings.append(abs(self._last - place))
             self._last = place
         self._open = kept
         return spacings

@@ -684,6 +684,12 @@ def test_a_dash_track_reads_the_spacing_the_road_carries_past() -> None:
         found += track.update(ends, rows, ym, step if k != 40 else None)
     # 88 m driven: four dashes passed, the chain broken between the second and the third.
     assert len(found) == 2 and np.allclose(found, spacing, atol=0.15), found
+    # A rear camera's road moves away: the dashes pass up the view, nearest last.
+    track, found = DashTrack(near=0.45), []
+    for k in range(80):
+        ends = np.array([27.0 - k * step + j * spacing for j in range(12)]) / ym
+        found += track.update(ends[(ends > 24) & (ends < rows - 1)], rows, ym, -step)
+    assert len(found) >= 3 and np.allclose(found, spacing, atol=0.15), found
     # Without the road's motion no dash is ever tied to the next.
     assert DashTrack().update(np.array([150.0]), rows, ym, None) == []
 
