@@ -108,7 +108,9 @@ class DashTrack:
             if len(dash) < self.least:
                 continue
             place = float(np.median(dash))
-            if self._last is not None and self._last != place:
+            # The one before passed nearer the camera (a rear camera's: farther); a dash lost
+            # for a frame and found again does not read as the next.
+            if self._last is not None and (self._last > place) == (advance_m >= 0):
                 spacings.append(abs(self._last - place))
             self._last = place
         self._open = kept
