@@ -29,7 +29,7 @@ class Mounting:
     the lens's focal length in 35 mm terms (None: the shipped camera's; sets the distances of a
     camera without a calibration, see `camera_cal.undistort.focal_scale_height`), and the
     spacing of the lane dashes on the roads it films, in metres, from which the road's length
-    scale is read where the lens is not known (`app.facts.DashScale`; None: not read)."""
+    scale is read where the lens is not known (`camera_cal.DashScale`; None: not read)."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None

@@ -314,7 +314,8 @@ class DashScale:
     """History for the road's length scale from the lane dashes' spacings, each as the bird's-
     eye view read it (the lane stage's `dash_spacings`): the view's metres are right only for
     the lens it assumes, and a flat road does not show the lens's focal length otherwise (a
-    longer lens on a stretched road gives the same picture; see the README's Facts).
+    longer lens on a stretched road gives the same picture; see the README, A lens read off
+    the lane dashes).
 
     Of the last `window` spacings within `span` metres, once `least` are in: their median, then
     twice the median of those within `near` of it (a dash missed reads twice the spacing, a dash
