@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lanes.config import LaneConfig
-from lanes.dashes import DashTrack, near_ends, painted_rows
+from lanes.dashes import DashTrack, near_ends
 from lanes.line import Line
 from lanes.measure import implausible_lane, lane_offset, lane_widths, radius_of_curvature
 from lanes.motion import RoadMotion
@@ -24,6 +24,7 @@ from lanes.search import (
     fit_line,
     histogram_base,
     paint_between,
+    painted_along,
     prior_search,
     window_search,
 )
@@ -219,16 +220,19 @@ class LaneFinder:
         `dash_share` of the rows along them) that the road's motion completed this frame, in
         the view's metres (see `DashTrack`)."""
         cfg = self.config
-        half_width = max(1, round(cfg.dash_half_width_m / view.xm_per_px))
-        fits = (None, None) if lane is None else (lane.left_fit, lane.right_fit)
-        found: list[float] = []
-        for fit, track in zip(fits, self.dashes, strict=True):
-            ends = np.zeros(0)
-            if fit is not None:
-                painted = painted_rows(mask, fit, half_width)
+        ends = [np.zeros(0), np.zeros(0)]  # none where a line is not dashed, or no lane
+        if lane is not None:
+            rows = np.arange(view.size[1], dtype=np.float64)
+            columns = np.stack([evaluate_fit(fit, rows) for fit in (lane.left_fit, lane.right_fit)])
+            half_width = max(1, round(cfg.dash_half_width_m / view.xm_per_px))
+            for side, painted in enumerate(painted_along(mask, columns, half_width)):
                 if cfg.dash_share[0] <= painted.mean() <= cfg.dash_share[1]:
-                    ends = near_ends(painted, view.ym_per_px, cfg.dash_bridge_m, cfg.dash_length_m)
-            found += track.update(ends, view.size[1], view.ym_per_px, advance_m)
+                    ends[side] = near_ends(
+                        painted, view.ym_per_px, cfg.dash_bridge_m, cfg.dash_length_m
+                    )
+        found: list[float] = []
+        for side_ends, track in zip(ends, self.dashes, strict=True):
+            found += track.update(side_ends, view.size[1], view.ym_per_px, advance_m)
         return tuple(found)
 
     @staticmethod
