@@ -325,7 +325,7 @@ class DashScale:
     the spacing read settles as more dashes come in) and within `plausible` (a lens 2.2 times
     wider than assumed to 1.4 times longer): the shipped camera's clips read their dashes
     within 5 % of 12.19 m, so its scale stays 1; outside, the dashes are taken for another
-    road's (`implausible_m` keeps the spacing for a note)."""
+    road's (`implausible_m` gives the spacing for a note)."""
 
     def __init__(
         self,
@@ -350,12 +350,20 @@ class DashScale:
         self._spacings: deque[float] = deque(maxlen=window)
         self.value = 1.0
         self.read_m: float | None = None  # the spacing the view reads, once it agrees
-        self.implausible_m: float | None = None
 
     def reset(self) -> None:
         """Forget the spacings read and the scale (the view's metres changed)."""
         self._spacings.clear()
-        self.value, self.read_m, self.implausible_m = 1.0, None, None
+        self.value, self.read_m = 1.0, None
+
+    @property
+    def implausible_m(self) -> float | None:
+        """The spacing read where no lens within `plausible` explains it (for a note), else
+        None."""
+        if self.read_m is None:
+            return None
+        low, high = self.plausible
+        return None if low <= self.spacing_m / self.read_m <= high else self.read_m
 
     def add(self, spacings: tuple[float, ...] | list[float]) -> float:
         """Take in one frame's spacings (metres of the view); the scale as of them."""
@@ -379,9 +387,7 @@ class DashScale:
         if abs(scale / self.value - 1) <= (self.tolerance if self.value == 1 else self.follow):
             return self.value
         if self.plausible[0] <= scale <= self.plausible[1]:
-            self.value, self.implausible_m = round(scale, 3), None
-        else:
-            self.implausible_m = read
+            self.value = round(scale, 3)
         return self.value
 
 

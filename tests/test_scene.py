@@ -297,6 +297,8 @@ def test_the_road_length_follows_the_dashes_only_where_they_read_another_lens() 
     india = DashScale(least=30)
     assert {india.add([4.9 + 0.1 * (k % 3)]) for k in range(60)} == {1.0}
     assert india.implausible_m == pytest.approx(5.0, abs=0.1)
+    assert {india.add([12.5]) for _ in range(200)} == {1.0}  # then US dashes: no note is left
+    assert india.implausible_m is None and india.read_m == 12.5
     scattered = DashScale(least=30)
     assert {scattered.add([s]) for s in rng.uniform(4, 40, 80)} == {1.0}
     assert scattered.read_m is None
