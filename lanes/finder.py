@@ -370,6 +370,7 @@ class LaneFinder:
         notes: list[str] = []
         lines = (self.left, self.right)
         ok = [f is not None for f in fits]
+        turned: int | None = None  # a line turning off the lane (see `_turned_off`)
         for i, (fit, line) in enumerate(zip(fits, lines, strict=True)):
             if fit is None:
                 notes.append(f"{('left', 'right')[i]}: too few pixels ({len(pixels[i])})")
@@ -394,18 +395,48 @@ class LaneFinder:
             )
             if doubt is not None:
                 notes.append(doubt)
-                # Keep the line with history, else the one backed by more paint.
+                # Keep the line with history, else the one backed by more paint; but of two
+                # with history, one turning off the lane ahead is dropped (an edge line along
+                # an exit: the lane's dashes go on; see `_turned_off`).
                 known = [line.smoothed is not None for line in lines]
                 if known[0] != known[1]:
                     ok[known.index(False)] = False
+                elif known[0] and (turned := self._turned_off(fits, view)) is not None:
+                    ok[turned] = False
                 else:
                     ok[int(len(pixels[0]) > len(pixels[1]))] = False
-        for fit, line, good in zip(fits, lines, ok, strict=True):
+        for i, (fit, line, good) in enumerate(zip(fits, lines, ok, strict=True)):
             if good and fit is not None:
                 line.accept(fit)
             else:
-                line.reject()
+                line.reject(turning_off=i == turned)
         return tuple(notes)
+
+    def _turned_off(self, fits: list[Fit | None], view: BirdsEye) -> int | None:
+        """Which line (0 left, 1 right) of a lane whose new fits part ahead turns off it; None
+        when no one line does. The lane is plausible at its near row and wider at its far one,
+        and one line's far end moved out (away from the other) from its own history while the
+        other's did not, that line followed up to now (a line lost for a frame or more and
+        found farther out has moved for another reason: the Indian clip's edge line at 1.5 s);
+        or a line already turning off moved out farther than the other (whose history, kept
+        while its fits were rejected, falls behind too)."""
+        cfg = self.config
+        left, right = fits
+        assert left is not None and right is not None
+        far, near = lane_widths(left, right, np.array([0.0, float(view.size[1])]))
+        if not cfg.min_lane_width_m <= near * view.xm_per_px <= cfg.one_lane_max_m or far <= near:
+            return None
+        lines = (self.left, self.right)
+        out = []
+        for sign, fit, line in zip((-1.0, 1.0), (left, right), lines, strict=True):
+            assert line.smoothed is not None
+            moved = evaluate_fit(fit, np.zeros(1))[0] - evaluate_fit(line.smoothed, np.zeros(1))[0]
+            out.append(sign * float(moved))
+        moving = int(out[1] > out[0])
+        line = lines[moving]
+        if line.turning_off:
+            return moving if out[moving] > 0 else None
+        return moving if out[1 - moving] <= 0 < out[moving] and line.misses == 0 else None
 
     def _history_lane(self, view: BirdsEye) -> tuple[Fit, Fit, bool] | None:
         """Both lines' smoothed fits, a side without history following the other at the
