@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator
@@ -111,13 +112,17 @@ class _Started:
     length: tuple[float, float | None] = (1.0, None)
 
 
-def lengthened(lane: LaneResult | None, length_scale: float) -> LaneResult | None:
+def lengthened(
+    lane: LaneResult | None, length_scale: float, straight_m: float = math.inf
+) -> LaneResult | None:
     """The lane stage's result with its radius of curvature on a road `length_scale` times as
     long as its view reads (the lines' offset across it kept, a bend x = y^2 / 2R reads R
-    times the scale squared)."""
+    times the scale squared); a radius so scaled past `straight_m` is straight (inf), as the
+    lane stage reports one it reads past it."""
     if length_scale == 1.0 or lane is None or lane.lane is None:
         return lane
     radius = lane.lane.curvature_m * length_scale**2
+    radius = math.inf if radius > straight_m else radius
     return replace(lane, lane=replace(lane.lane, curvature_m=radius))
 
 
@@ -619,7 +624,8 @@ class Pipeline:
                 lane.advance_m if lane is not None else None,
                 self._geometry,
             ).scaled(*started.length)
-        lane = lengthened(lane, started.length[0])
+        straight = self.lanes.config.straight_radius_m if self.lanes is not None else math.inf
+        lane = lengthened(lane, started.length[0], straight)
         events: tuple[Event, ...] = ()
         if self._fps > 0:  # events need time: not for a still
             estimate = lane.lane if lane is not None else None

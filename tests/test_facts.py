@@ -487,6 +487,14 @@ def test_a_longer_road_scales_distances_speeds_and_radius_but_not_times() -> Non
     assert longer.lane.curvature_m == pytest.approx(640.0) and longer.lane.offset_m == 0.3
     result = LaneResult(lane)
     assert lengthened(result, 1.0) is result
+    # A radius scaled past the lane stage's straight bound reads straight, as the stage says.
+    bent = replace(lane, curvature_m=8000.0)
+    farther = lengthened(LaneResult(bent), 1.2, 10_000.0)
+    assert farther is not None and farther.lane is not None
+    assert farther.lane.curvature_m == np.inf
+    nearer = lengthened(LaneResult(bent), 0.8, 10_000.0)
+    assert nearer is not None and nearer.lane is not None
+    assert nearer.lane.curvature_m == pytest.approx(5120.0)
 
 
 @pytest.mark.slow
