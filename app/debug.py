@@ -56,13 +56,20 @@ def _boxes(frame: Frame, detections: Detections, color: tuple[int, int, int]) ->
     return compose(frame, shown, [BoxAnnotator(color)])
 
 
-def scene_picture(frame: Frame, scene: SceneGeometry, roll_deg: float = 0.0) -> Frame:
+def scene_picture(
+    frame: Frame,
+    scene: SceneGeometry,
+    roll_deg: float = 0.0,
+    length: tuple[float, float | None] = (1.0, None),
+) -> Frame:
     """The scene geometry on the frame: the live box (green; its bottom is labelled when a
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
     --horizon) with the ground scale once it moved from 1 and the turn the frame was levelled
     by (`roll_deg`, stated or read), the road's vanishing point on it (a circle, once
-    estimated), the boxes of burnt-in captions (red), and the road's grey level and grain once
-    measured (and that the picture is read as monochrome, where it is)."""
+    estimated), the boxes of burnt-in captions (red), the road's grey level and grain once
+    measured (and that the picture is read as monochrome, where it is), and the lane dashes'
+    spacing once read with the length scale it gives (`length`, as the record's
+    `length_scale` and `dash_m`)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -86,6 +93,10 @@ def scene_picture(frame: Frame, scene: SceneGeometry, roll_deg: float = 0.0) -> 
         light = f"road grey {scene.road_grey:.0f}, grain {scene.grain:.2f}"
         light += ", monochrome (grey models)" if scene.monochrome else ""
         cv2.putText(picture, light, (x0 + 10, y0 + 30), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
+    scale, dash_m = length
+    if dash_m is not None:
+        dashes = f"lane dashes {dash_m:.1f} m apart, length scale {scale:.2f}"
+        cv2.putText(picture, dashes, (x0 + 10, y0 + 60), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.bonnet_y is not None:
         cv2.putText(
             picture, "bonnet", (x0 + 10, y1 + 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 255, 0), 2
@@ -97,7 +108,11 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
     """Named pictures of every intermediate of one processed frame, in pipeline order."""
     pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
     if out.result.scene is not None:
-        pictures["scene"] = scene_picture(out.undistorted, out.result.scene, out.result.roll_deg)
+        facts = out.result.facts
+        length = (facts.length_scale, facts.dash_m) if facts is not None else (1.0, None)
+        pictures["scene"] = scene_picture(
+            out.undistorted, out.result.scene, out.result.roll_deg, length
+        )
     lane = out.result.lane
     if lane is not None and lane.debug is not None:
         pictures["lane_mask"] = (lane.debug.mask * 255).astype(np.uint8)

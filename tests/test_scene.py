@@ -489,7 +489,7 @@ def test_debug_of_an_unknown_camera_runs_long_enough_to_place_its_stages(
 
 def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     """The ground scale is drawn with the horizon once it moved from the tuned camera's 1, and
-    so is a turn the frame was levelled by."""
+    so is a turn the frame was levelled by; the dashes' spacing and length scale once read."""
     from dataclasses import replace
 
     from app.debug import scene_picture
@@ -502,6 +502,11 @@ def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     assert (higher[label] > 0).sum() > 1.3 * (tuned[label] > 0).sum()
     levelled = scene_picture(frame, scene, 2.5)
     assert (levelled[label] > 0).sum() > 1.3 * (tuned[label] > 0).sum()
+    # The lane dashes' spacing and the length scale it gives, once read, under the live top.
+    top = (slice(35, 70), slice(5, 600))  # inside the live box's green sides
+    assert not tuned[top].any()
+    read = scene_picture(frame, scene, 0.0, (0.79, 15.5))
+    assert read[top].any() and np.array_equal(read[label], tuned[label])
 
 
 def test_the_road_ahead_is_measured_for_its_lightness_not_the_sky_or_bonnet() -> None:
