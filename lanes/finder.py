@@ -414,12 +414,12 @@ class LaneFinder:
 
     def _turned_off(self, fits: list[Fit | None], view: BirdsEye) -> int | None:
         """Which line (0 left, 1 right) of a lane whose new fits part ahead turns off it; None
-        when no one line does. The lane is plausible at its near row and wider at its far one,
-        and one line's far end moved out (away from the other) from its own history while the
-        other's did not, that line followed up to now (a line lost for a frame or more and
-        found farther out has moved for another reason: the Indian clip's edge line at 1.5 s);
-        or a line already turning off moved out farther than the other (whose history, kept
-        while its fits were rejected, falls behind too)."""
+        when no one line does. The fits are one lane apart at the near row (2.6-4.6 m, to
+        `one_lane_max_m`) and wider at the far one, and one line's far end moved out (away from
+        the other) from its own history while the other's did not, that line followed up to now
+        (a line lost for a frame or more and found farther out has moved for another reason:
+        the Indian clip's edge line at 1.5 s); or a line already turning off moved out farther
+        than the other (whose history, kept while its fits were rejected, falls behind too)."""
         cfg = self.config
         left, right = fits
         assert left is not None and right is not None
