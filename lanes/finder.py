@@ -427,11 +427,10 @@ class LaneFinder:
         if not cfg.min_lane_width_m <= near * view.xm_per_px <= cfg.one_lane_max_m or far <= near:
             return None
         lines = (self.left, self.right)
-        out = []
+        out = []  # each far end's move out (row 0: x is the fit's constant term)
         for sign, fit, line in zip((-1.0, 1.0), (left, right), lines, strict=True):
             assert line.smoothed is not None
-            moved = evaluate_fit(fit, np.zeros(1))[0] - evaluate_fit(line.smoothed, np.zeros(1))[0]
-            out.append(sign * float(moved))
+            out.append(sign * float(fit[-1] - line.smoothed[-1]))
         moving = int(out[1] > out[0])
         line = lines[moving]
         if line.turning_off:
