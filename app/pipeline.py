@@ -117,12 +117,12 @@ def lengthened(
 ) -> LaneResult | None:
     """The lane stage's result with its radius of curvature on a road `length_scale` times as
     long as its view reads (the lines' offset across it kept, a bend x = y^2 / 2R reads R
-    times the scale squared); a radius so scaled past `straight_m` is straight (inf), as the
-    lane stage reports one it reads past it."""
+    times the scale squared); a radius so scaled to `straight_m` or past it is straight (inf),
+    as the lane stage reports one it reads so."""
     if length_scale == 1.0 or lane is None or lane.lane is None:
         return lane
     radius = lane.lane.curvature_m * length_scale**2
-    radius = math.inf if radius > straight_m else radius
+    radius = math.inf if radius >= straight_m else radius
     return replace(lane, lane=replace(lane.lane, curvature_m=radius))
 
 
