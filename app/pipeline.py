@@ -45,6 +45,7 @@ from camera_cal import (
 )
 from lanes.config import LaneConfig
 from lanes.finder import LaneFinder, LaneResult
+from lanes.measure import reported_radius
 from lanes.perspective import BirdsEye, birdseye_for
 from vehicles.detections import Detections
 from vehicles.detector import VehicleDetector, VehicleResult
@@ -121,8 +122,7 @@ def lengthened(
     as the lane stage reports one it reads so."""
     if length_scale == 1.0 or lane is None or lane.lane is None:
         return lane
-    radius = lane.lane.curvature_m * length_scale**2
-    radius = math.inf if radius >= straight_m else radius
+    radius = reported_radius(1.0 / (lane.lane.curvature_m * length_scale**2), straight_m)
     return replace(lane, lane=replace(lane.lane, curvature_m=radius))
 
 

@@ -11,7 +11,13 @@ from numpy.typing import NDArray
 from lanes.config import LaneConfig
 from lanes.dashes import DashTrack, near_ends
 from lanes.line import Line
-from lanes.measure import implausible_lane, lane_offset, lane_widths, radius_of_curvature
+from lanes.measure import (
+    implausible_lane,
+    lane_offset,
+    lane_widths,
+    radius_of_curvature,
+    reported_radius,
+)
 from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.search import (
@@ -498,8 +504,7 @@ class LaneFinder:
         ]
         # The mean of curvatures (not radii) so one near-straight line does not dominate.
         curvature = float(np.mean([1.0 / r for r in radii]))
-        # Past straight_radius_m a radius cannot be told from a straight road: infinite.
-        radius = 1.0 / curvature if curvature * cfg.straight_radius_m > 1.0 else math.inf
+        radius = reported_radius(curvature, cfg.straight_radius_m)
         # The camera sits at the middle of the live picture; the warp's bottom row is nearest.
         offset = lane_offset(left, right, bh, view.camera_x, view.xm_per_px)
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)

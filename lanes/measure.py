@@ -20,6 +20,12 @@ def radius_of_curvature(
     return float(min(cap_m, 1.0 / curvature)) if curvature > 0 else cap_m
 
 
+def reported_radius(curvature: float, straight_m: float) -> float:
+    """The radius in metres of a bend of `curvature` (1/m), or inf (straight) at `straight_m`
+    or past it: a bend that gentle cannot be told from a straight road."""
+    return 1.0 / curvature if curvature * straight_m > 1.0 else math.inf
+
+
 def lane_offset(left: Fit, right: Fit, y_px: float, centre_px: float, xm_per_px: float) -> float:
     """Camera position minus lane centre in metres: positive when the car is right of centre."""
     middle = (evaluate_fit(left, y_px) + evaluate_fit(right, y_px)) / 2
