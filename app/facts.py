@@ -64,9 +64,10 @@ class RoadGeometry:
             return np.where(below > 0.5, self.k / np.maximum(below, 0.5), np.inf)
 
     def lateral(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Metres to the right of the camera's axis of road points (x, y) of the frame."""
+        """Metres to the right of the road line under the camera (`BirdsEye.camera_column`)
+        of road points (x, y) of the frame."""
         pts = np.asarray(points, np.float64).reshape(-1, 2)
-        ahead = np.column_stack([np.full(len(pts), self.view.frame_size[0] / 2), pts[:, 1]])
+        ahead = np.column_stack([np.full(len(pts), self.view.camera_column), pts[:, 1]])
         xs = self.view.to_birdseye(pts)[:, 0] - self.view.to_birdseye(ahead)[:, 0]
         return np.asarray(xs * self.view.xm_per_px)
 
@@ -82,8 +83,8 @@ def lane_of(
     centre, width = 0.0, LANE_WIDTH_M
     if lane is not None:
         view = geometry.view
-        cx = view.frame_size[0] / 2
-        # The camera's axis at the point's distance, in the bird's-eye view (rows beyond the
+        cx = view.camera_column
+        # The camera's line at the point's distance, in the bird's-eye view (rows beyond the
         # view are read at its far edge: the fits are not extrapolated).
         row = geometry.horizon_y + geometry.k / max(distance_m, 1e-3)
         axis = view.to_birdseye(np.array([[cx, row]]))[0]

@@ -30,6 +30,7 @@ from lanes.search import (
     fit_line,
     histogram_base,
     paint_between,
+    paint_inside,
     painted_along,
     prior_search,
     window_search,
@@ -39,6 +40,7 @@ from lanes.threshold import lane_mask
 Boxes = tuple[tuple[int, int, int, int], ...]  # x0, y0, x1, y1 in the frame
 MIDDLE_SHARES = np.linspace(0.3, 0.7, 17)  # where between two lines a middle line is looked for
 MIDDLE = (0.35, 0.65)  # where such a line makes the two lines bound two lanes of a width
+ALONG_SHARES = np.linspace(0.1, 0.9, 33)  # where a line along a lane's inside is looked for
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,7 +210,9 @@ class LaneFinder:
         if inside is not None:
             status = (*status, inside)
         believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
-        lane, doubt = self._estimate(view, width_known) if astride is None else (None, astride)
+        lane, doubt = (
+            self._estimate(view, width_known, paint.mask) if astride is None else (None, astride)
+        )
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
         debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
@@ -460,7 +464,7 @@ class LaneFinder:
         return left, right, made_up
 
     def _estimate(
-        self, view: BirdsEye, width_known: bool
+        self, view: BirdsEye, width_known: bool, mask: NDArray[np.uint8]
     ) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
         (too narrow or wide, not parallel, too sharp a bend), not ours (the camera outside it:
@@ -487,6 +491,14 @@ class LaneFinder:
         )
         if doubt is not None:
             return None, doubt
+        # Paint along a line inside the lane (the astride rule's) is not paint across it.
+        half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
+        share, coverage = paint_between(mask, left, right, ALONG_SHARES, half_width)
+        along = left + share * (right - left) if coverage >= cfg.middle_line_rows else None
+        margin = cfg.inside_margin_m / view.xm_per_px
+        painted = paint_inside(mask, left, right, margin, view.outside, along)
+        if painted > cfg.max_inside_paint:
+            return None, f"paint across it ({painted:.0%} of it: a crossing, or kerb stones)"
         # From the live picture's bottom up to the trapezoid's top row (where the warp is sure).
         lx0, _, lx1, ly1 = view.live
         middle = (lx0 + lx1) / 2
@@ -505,7 +517,7 @@ class LaneFinder:
         # The mean of curvatures (not radii) so one near-straight line does not dominate.
         curvature = float(np.mean([1.0 / r for r in radii]))
         radius = reported_radius(curvature, cfg.straight_radius_m)
-        # The camera sits at the middle of the live picture; the warp's bottom row is nearest.
+        # The camera sits on its column (`BirdsEye.camera_column`); the bottom row is nearest.
         offset = lane_offset(left, right, bh, view.camera_x, view.xm_per_px)
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
         if abs(offset) > cfg.max_offset_share * width:

@@ -101,6 +101,31 @@ def paint_between(
     return float(shares[best]), float(coverage[best])
 
 
+def paint_inside(
+    mask: NDArray[np.uint8],
+    left: Fit,
+    right: Fit,
+    margin: float,
+    hidden: NDArray[np.bool_] | None = None,
+    along: Fit | None = None,
+) -> float:
+    """The share of a lane's inside (between its two lines, `margin` pixels in from each,
+    outside `hidden` and twice `margin` off a line `along` it: a double line's other stripe
+    too) that the bird's-eye `mask` paints: about none on a lane, where a pedestrian
+    crossing's bars or kerb stones paint it across."""
+    rows = np.arange(mask.shape[0], dtype=np.float64)
+    lo = evaluate_fit(left, rows)[:, None] + margin
+    hi = evaluate_fit(right, rows)[:, None] - margin
+    columns = np.arange(mask.shape[1], dtype=np.float64)[None, :]
+    inside = (columns > lo) & (columns < hi)
+    if along is not None:
+        inside &= np.abs(columns - evaluate_fit(along, rows)[:, None]) > 2 * margin
+    if hidden is not None:
+        inside &= ~hidden
+    area = int(inside.sum())
+    return float(np.count_nonzero(mask.astype(bool) & inside) / area) if area else 0.0
+
+
 def window_search(
     paint: Paint, base_x: float, windows: int, margin: int, min_pixels: int
 ) -> LinePixels:

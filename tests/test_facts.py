@@ -19,7 +19,15 @@ from lanes.finder import LaneFinder
 from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.threshold import lane_mask
-from tests.helpers import dashed_road, moving_road, process_clip, read_record, run_cli
+from tests.helpers import (
+    dashed_road,
+    moving_road,
+    process_clip,
+    read_record,
+    road_camera,
+    run_cli,
+    seen_road,
+)
 from vehicles.detections import Detections
 
 DASH_PERIOD_M = 12.19  # US highways: a 10 ft dash and a 30 ft gap
@@ -55,6 +63,25 @@ def test_flat_road_distance_and_lateral_from_the_warp() -> None:
     points = np.column_stack([640 + f * 1.5 / z, rows])  # 1.5 m to the right at each distance
     np.testing.assert_allclose(geometry.lateral(points), 1.5, rtol=1e-6)
     assert np.isinf(geometry.distance(np.array([cy - 10.0])))[0]  # above the horizon
+
+
+def test_a_camera_turned_sideways_reads_where_vehicles_are_beside_it() -> None:
+    """Road points on the right line of a lane a camera 0.4 m right of its centre sees, turned 3
+    degrees right: 1.45 m to its right (within 3 %) at 8-60 m, and a car there in the right
+    lane, one on the camera's line in ours. From the picture's middle they read 0.5 m
+    further right at 10 m and 2.7 m further at 60 m (the right lane's car then 'other')."""
+    camera = road_camera(3.0, 0.4)
+    _, vanishing_x = seen_road([], camera)
+    view = birdseye_for((1280, 720), LaneConfig(), horizon_y=420.0, vanishing_x=vanishing_x)
+    geometry = RoadGeometry.of(view)
+    z = np.array([8.0, 15.0, 30.0, 60.0])
+    seen = (camera @ np.stack([np.full_like(z, 1.85), z, np.ones_like(z)])).T
+    points = seen[:, :2] / seen[:, 2:]
+    np.testing.assert_allclose(geometry.lateral(points), 1.45, rtol=0.03)
+    for x, lane in ((0.4, "ego"), (3.7, "right")):  # on the camera's line; the next lane's middle
+        car = camera @ np.array([x, 60.0, 1.0])
+        lateral = float(geometry.lateral((car[:2] / car[2])[None])[0])
+        assert lane_of(lateral, 60.0, None, geometry) == lane, (x, lateral)
 
 
 def test_road_motion_measures_a_known_shift() -> None:

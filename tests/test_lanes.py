@@ -18,9 +18,9 @@ from lanes.finder import LaneFinder
 from lanes.line import Line
 from lanes.measure import implausible_lane, radius_of_curvature
 from lanes.perspective import birdseye_for
-from lanes.search import LinePixels, fit_lane, fit_line, paint_between
+from lanes.search import LinePixels, fit_lane, fit_line, paint_between, paint_inside
 from lanes.threshold import lane_mask
-from tests.helpers import dashed_road, process_clip, raised_camera
+from tests.helpers import dashed_road, process_clip, raised_camera, road_camera, seen_road
 
 
 def _still(data_dir: Path, name: str) -> np.ndarray:
@@ -358,11 +358,19 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # eye; 83 % since a lane with the dashed divider inside it, away from the camera, is no
     # longer drawn (two lanes, or one side made up across the divider; checked by eye at
     # frames 8, 790, 820 and 850, where the car's own lane reads under 2.6 m and none is
-    # drawn); 82 % since a narrow lane with a solid line along its middle is none of ours: in
-    # 0.4-1.5 s lanes were drawn from the dashes to the median's kerb, the white edge line
-    # along them (checked by eye at frames 9, 12, 20, 28 and 37). Over the junction's zebra
-    # crossing (34.6-37.7 s) there is no lane of ours, and none is drawn in 85 % of the frames
-    # (13 % before lanes running 8 degrees off were doubted).
+    # drawn); 82 % since a narrow lane with a solid line along its middle is none of ours; 72 %
+    # since the camera is placed on the vanishing point's column, not the picture's middle
+    # (90 px right of it): lanes of two with the divider inside that it was then outside of
+    # are not drawn (checked by eye at frames 677, 708, 730, 750, 758, 764 and 810), nor lanes
+    # with paint across them (another crossing at 7.7-9.3 s, kerb stones at 0.2-0.3 s).
+    # In 0.4-1.5 s lanes were drawn from the dashes to the median's kerb, the white edge line
+    # along them (checked by eye at frames 9, 12, 20, 28 and 37), and then none; with the
+    # camera placed right, a few from the dashes to the edge line, as it is (frames 29-35,
+    # checked by eye at 29, 33 and 35). Over the junction's zebra
+    # crossing (34.6-37.7 s) there is no lane of ours: none was drawn in 85 % of the frames
+    # (13 % before lanes running 8 degrees off were doubted), in 46 % with the camera placed
+    # right (lanes across the whole road, bent along the bars' ends; checked by eye at frames
+    # 858-906), and in all since paint across a lane makes it none of ours.
     # Past the crossing (41 s on) the car runs beside the median's fence: lanes were drawn on
     # the fence and the kerb, 2.1-2.4 m left of the camera (checked by eye), in 80 % of the
     # frames; the camera outside a lane makes it none of ours, and none is drawn in 95 %.
@@ -370,11 +378,21 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
         wild_dir / "india_highway_wildfilms.mp4", tmp_path, "--no-vehicles", "--calibration", "none"
     )
     road = [r for r in rows if r["time_s"] < 34.5]
-    assert sum(r["lane"] is not None for r in road) >= 0.8 * len(road)
-    kerb = [r for r in rows if 0.4 <= r["time_s"] < 1.5]
-    assert sum(r["lane"] is not None for r in kerb) <= 0.1 * len(kerb)
+    assert sum(r["lane"] is not None for r in road) >= 0.68 * len(road)
+    # The white edge line's centre at rows 300 and 340 of frames 12, 20, 29 and 35 (read off
+    # their pixels, checked by eye; in between it moves straight), the kerb 40-60 px beyond.
+    edge = {12: (514, 566), 20: (519, 580), 29: (506, 565), 35: (530, 590)}
+    drawn = [r for r in rows if 12 <= r["frame"] <= 35 and r["lane"] is not None]
+    assert len(drawn) >= 3
+    for r in drawn:
+        truth = [
+            np.interp(r["frame"], sorted(edge), [edge[k][i] for k in sorted(edge)]) for i in (0, 1)
+        ]
+        right = np.array(r["lane"]["right"])
+        at = np.interp([300, 340], right[::-1, 1], right[::-1, 0])
+        assert np.abs(at - truth).max() <= 20, (r["frame"], at, truth)
     zebra = [r for r in rows if 34.6 <= r["time_s"] < 37.7]
-    assert sum(r["lane"] is None for r in zebra) >= 0.75 * len(zebra)
+    assert sum(r["lane"] is None for r in zebra) >= 0.95 * len(zebra)
     fence = [r for r in rows if r["time_s"] >= 41.0]
     assert sum(r["lane"] is None for r in fence) >= 0.9 * len(fence)
     # Its watermark is in the record from its sixth second on, in the lower half.
@@ -763,3 +781,62 @@ def test_the_lane_keeps_its_dashes_where_the_edge_line_turns_off_along_an_exit()
     assert len(offsets) >= len(results) - 2, [r.status for r in results]
     assert any("wide" in note for r in results for note in r.status)  # the lines parted
     assert np.ptp(offsets) < 0.4, offsets
+
+
+LANE_LINES = [(-1.925, -1.775, 1.0, 150.0), (1.775, 1.925, 1.0, 150.0)]  # a 3.7 m lane's
+
+
+@pytest.mark.parametrize("turn_deg", [-6.0, -3.0, 0.0, 3.0, 6.0])
+def test_a_camera_turned_sideways_reads_its_place_in_the_lane(turn_deg: float) -> None:
+    """A camera 0.4 m right of its lane's centre, turned up to 6 degrees sideways (the road's
+    vanishing point up to 105 px off the picture's middle, where the scene finds it): the lane
+    offset reads 0.4 m (within 5 cm) and its width 3.7 m. Read from the picture's middle it
+    was 0.66 m turned 3 degrees right, 0.15 m turned 3 degrees left, 0.91 m at 6 degrees."""
+    frame, vanishing_x = seen_road(LANE_LINES, road_camera(turn_deg, 0.4))
+    assert abs(vanishing_x - 640) > 50 or turn_deg == 0
+    finder = LaneFinder(LaneConfig())
+    for _ in range(3):
+        result = finder.process(frame, horizon_y=420.0, vanishing_x=vanishing_x)
+    assert result.lane is not None, result.status
+    assert result.lane.offset_m == pytest.approx(0.4, abs=0.05)
+    assert result.lane.width_m == pytest.approx(3.7, abs=0.1)
+    view = finder.current_view
+    assert view is not None and view.camera_column == vanishing_x
+
+
+def test_paint_inside_a_lane_is_measured_between_its_lines() -> None:
+    """The share of a lane's inside that is painted: none for an empty lane, the bars' share
+    for bars across it, and nothing of its own lines (kept out by the margin) nor of what
+    is hidden."""
+    mask = np.zeros((100, 200), np.uint8)
+    left, right = np.array([0.0, 0.0, 50.0]), np.array([0.0, 0.0, 150.0])
+    mask[:, 48:53] = mask[:, 148:153] = 1  # the lines
+    assert paint_inside(mask, left, right, 5.0) == 0.0
+    mask[40:60, 60:140:10] = 1  # bars, a pixel wide every 10 columns, 20 rows long
+    share = paint_inside(mask, left, right, 5.0)
+    assert share == pytest.approx(8 * 20 / (100 * 89), rel=1e-6)
+    hidden = np.zeros_like(mask, bool)
+    hidden[30:70] = True
+    assert paint_inside(mask, left, right, 5.0, hidden) == 0.0
+
+
+def test_no_lane_is_drawn_across_painted_bars() -> None:
+    """A lane with bars painted across it (30 cm wide, 60 cm apart, 3 m along the road: a
+    pedestrian crossing as a view whose metres read wider sees it, or kerb stones) is no lane
+    of ours while they are in view, and is again once they are behind; an arrow painted in the
+    lane (30 cm by 5 m) leaves it a lane."""
+    camera = road_camera()
+    finder = LaneFinder(LaneConfig())
+    arrow = [(-0.15, 0.15, 12.0, 17.0)]
+    for _ in range(3):
+        result = finder.process(seen_road(LANE_LINES + arrow, camera)[0], horizon_y=420.0)
+    assert result.lane is not None, result.status
+    drawn = []
+    for near in (20.0, 14.0, 10.0, 7.0, 0.0):
+        bars = [(x, x + 0.3, near, near + 3.0) for x in np.arange(-6.0, 6.0, 0.9)]
+        for _ in range(3):
+            result = finder.process(seen_road(LANE_LINES + bars, camera)[0], horizon_y=420.0)
+        drawn.append(result.lane is not None)
+        if near:
+            assert any("paint across it" in note for note in result.status), result.status
+    assert drawn == [False, False, False, False, True], drawn
