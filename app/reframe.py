@@ -152,13 +152,16 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
     middle 80 % enlarged back), a 4:3 crop, a 21:9 crop (an ultra-wide dashcam's picture: the
     top and bottom cut, the bonnet and the nearest road with them), black side bars, two other
     sizes and half the size (many phones' and dashcams' small copies), half and twice the frame
-    rate, mirrored (traffic keeping left, as in the UK, India or Japan), and turned 3 degrees
-    (a camera mounted askew, levelled by `--roll`)."""
+    rate, mirrored (traffic keeping left, as in the UK, India or Japan), turned 3 degrees
+    (a camera mounted askew, levelled by `--roll`), and cut off-centre by a tenth of the width
+    on either side (as a camera turned 3 degrees sideways sees the road: the picture's middle
+    64 px off the road's vanishing point at 1280 px)."""
     w, h = source
     cut = round(0.1 * h)
     side = round((w - h * 4 / 3) / 2)
     narrow = (round(0.1 * w), round(0.1 * h), w - round(0.1 * w), h - round(0.1 * h))
     wide = round(w * 9 / 21)
+    tenth = round(0.1 * w)
     return (
         Framing("as is"),
         Framing("horizon up", crop=(0, cut, w, h)),
@@ -175,6 +178,8 @@ def standard_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
         Framing("mirrored", mirror=True),
         Framing("mirrored, --traffic left", mirror=True, keep_left=True),
         Framing("turned 3°, --roll 3", roll=3.0, roll_stated=3.0),
+        Framing("cut off-centre (as turned 3° right)", crop=(tenth, 0, w, h)),
+        Framing("cut off-centre (as turned 3° left)", crop=(0, 0, w - tenth, h)),
     )
 
 
@@ -559,6 +564,26 @@ def speed_ratios(
     return np.asarray(ratios, np.float64)
 
 
+def offset_shifts(
+    reference: Sequence[Mapping[str, Any]], frames: Sequence[Mapping[str, Any]], framing: Framing
+) -> NDArray[np.float64]:
+    """Per frame with a lane in both, the lane offset in the re-framed clip's record `frames`
+    less the offset in the `reference` record of the clip as it is at the source frame it shows
+    (negated where mirrored: the camera is as far the other way): 0 where the camera's place
+    in its lane is read right. None for a clip played backwards."""
+    if framing.reverse:
+        return np.zeros(0, np.float64)
+    offsets = {int(r["frame"]): (r.get("lane") or {}).get("offset_m") for r in reference}
+    sign = -1.0 if framing.mirror else 1.0
+    shifts = []
+    for record in frames:
+        seen = offsets.get(framing.source_frame(int(record["frame"]), len(reference)))
+        framed = (record.get("lane") or {}).get("offset_m")
+        if seen is not None and framed is not None:
+            shifts.append(framed - sign * seen)
+    return np.asarray(shifts, np.float64)
+
+
 def pooled(scores: Iterable[Mapping[str, Any]], threshold: str = "iou_0.5") -> dict[str, float]:
     """Vehicle precision, recall and mean IoU pooled over clips, and the lane's share within
     20 px, from `evaluate` results."""
@@ -592,8 +617,9 @@ def framing_table(
     """Pooled scores per framing over `clips` ((video, labels) pairs of one size): the table
     that shows whether roadview holds on footage framed unlike the clips it was tuned on. With
     "as is" first, each other framing also gets the median ratio of its vehicles' distances to
-    the same vehicles' as they are, and of its speed to the speed at the same moment as it is.
-    Copies are encoded with the x264 `preset`."""
+    the same vehicles' as they are, and of its speed to the speed at the same moment as it is,
+    and the median shift of its lane offset (`offset_shifts`). Copies are encoded with the x264
+    `preset`."""
     source = probe_video(clips[0][0]).size
     table: dict[str, dict[str, float]] = {}
     plain: list[Sequence[Mapping[str, Any]]] = []
@@ -616,4 +642,9 @@ def framing_table(
             # median ratios.
             for key, ratios in (("distance_ratio", distances), ("speed_ratio", speeds)):
                 table[framing.name][key] = float(np.median(ratios)) if len(ratios) else float("nan")
+            # ... and the lane offset (0 = not at all): the median shift, in metres.
+            shifts = np.concatenate([offset_shifts(ref, s["frames"], framing) for ref, s in pairs])
+            table[framing.name]["offset_shift_m"] = (
+                float(np.median(shifts)) if len(shifts) else float("nan")
+            )
     return table

@@ -380,6 +380,7 @@ def quality(data: Path, report: dict[str, Any]) -> None:
             f"mean IoU {row['mean_iou']:.3f}  lane within 20 px {row['lane_within_20px']:.3f}"
             + (f"  distances x{row['distance_ratio']:.3f}" if "distance_ratio" in row else "")
             + (f"  speed x{row['speed_ratio']:.3f}" if "speed_ratio" in row else "")
+            + (f"  offset {row['offset_shift_m']:+.2f} m" if "offset_shift_m" in row else "")
         )
     lens = report["dash_lens"] = dash_lens(data)
     print(

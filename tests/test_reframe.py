@@ -20,6 +20,7 @@ from app.reframe import (
     dusk_framings,
     framing_scores,
     framing_table,
+    offset_shifts,
     pooled,
     reframe_image,
     reframe_labels,
@@ -39,6 +40,7 @@ RECALL_DROP = 0.05
 MEAN_IOU = 0.75
 LANE_WITHIN = 0.99
 DISTANCE_DRIFT = 0.05  # median distance of the same vehicles (and speed), re-framed over as it is
+OFFSET_DRIFT_M = 0.05  # median shift of the lane offset, re-framed against as it is
 
 
 def _labels(box: list[int], lane: dict[str, int]) -> dict[str, Any]:
@@ -156,9 +158,11 @@ def test_labels_turn_with_a_picture_as_roadview_left_it_turned(turn: float) -> N
 def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
     """The labelled clips re-framed (horizon 10 % up and down, a narrower view, 4:3, 21:9,
     black side bars, 960x540, 1920x1080, 640x360, half and twice the frame rate, mirrored, mirrored
-    with `--traffic left`, and turned 3 degrees with `--roll 3`) and run without calibration, as
-    footage of an unknown camera: pooled over the three clips, the vehicles, their distances,
-    the speed and the lane stay close to the clips as they are."""
+    with `--traffic left`, turned 3 degrees with `--roll 3`, and cut off-centre by a tenth of
+    the width, as a camera turned 3 degrees sideways sees the road) and run without calibration,
+    as footage of an unknown camera: pooled over the three clips, the vehicles, their distances,
+    the speed, the lane and the camera's place in it stay close to the clips as they are (cut
+    off-centre, the offset moved 0.30 m with the picture's middle: now within 2 cm)."""
     clips = [
         (data_dir / "videos" / f"{c}.mp4", data_dir / "labels" / f"{c}.json")
         for c in ("test_video", "project_cut_1", "project_cut_2")
@@ -171,6 +175,7 @@ def test_roadview_holds_on_reframed_clips(data_dir: Path) -> None:
         if name != "narrower view":
             assert abs(row["distance_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
             assert abs(row["speed_ratio"] - 1) <= DISTANCE_DRIFT, (name, row)
+        assert abs(row["offset_shift_m"]) <= OFFSET_DRIFT_M, (name, row)
         # Mirrored, the median barrier stands on the right, where the classifier's
         # non-vehicles never showed it (their crops of it are of the left): its windows are
         # not boxed as their mirror images are not vehicles (0.936 before; README).
@@ -279,6 +284,23 @@ def test_roadview_holds_on_a_rear_cameras_footage(data_dir: Path) -> None:
         # Unaided, the swapped sides read as traffic keeping left: as the mirrored row.
         assert row["precision"] >= PRECISION, (name, row)
         assert row["recall"] >= plain["recall"] - RECALL_DROP, (name, row, plain)
+
+
+def test_offset_shifts_pair_the_same_moment_across_framings() -> None:
+    """The lane offset's shift is taken at the source frame each re-framed frame shows, with the
+    sign flipped where mirrored (the camera is as far the other way), and only where both have a
+    lane; none for a clip played backwards."""
+    reference = [
+        {"frame": 0, "lane": {"offset_m": 0.5}},
+        {"frame": 1, "lane": {"offset_m": -0.2}},
+        {"frame": 2, "lane": None},
+    ]
+    frames = [{"frame": k, "lane": {"offset_m": 0.1 * k}} for k in range(6)]
+    doubled = offset_shifts(reference, frames, Framing("twice", rate=2.0))
+    np.testing.assert_allclose(doubled, [-0.5, -0.4, 0.4, 0.5])
+    mirrored = offset_shifts(reference, frames[:2], Framing("mirrored", mirror=True))
+    np.testing.assert_allclose(mirrored, [0.5, -0.1])
+    assert len(offset_shifts(reference, frames[:3], Framing("back", reverse=True))) == 0
 
 
 def test_distance_ratios_pair_the_same_vehicle_across_framings() -> None:
