@@ -570,7 +570,8 @@ def offset_shifts(
     """Per frame with a lane in both, the lane offset in the re-framed clip's record `frames`
     less the offset in the `reference` record of the clip as it is at the source frame it shows
     (negated where mirrored: the camera is as far the other way): 0 where the camera's place
-    in its lane is read right. None for a clip played backwards."""
+    in its lane is read right; none for a clip played backwards (its lane is seen from
+    behind)."""
     if framing.reverse:
         return np.zeros(0, np.float64)
     offsets = {int(r["frame"]): (r.get("lane") or {}).get("offset_m") for r in reference}

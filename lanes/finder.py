@@ -467,9 +467,10 @@ class LaneFinder:
         self, view: BirdsEye, width_known: bool, mask: NDArray[np.uint8]
     ) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
-        (too narrow or wide, not parallel, too sharp a bend), not ours (the camera outside it:
-        the lines' history is then dropped, so the next frame searches near the car) or has a
-        side made up at a width not `width_known`: no lane rather than a wrong one."""
+        (too narrow or wide, not parallel, too sharp a bend, painted across), not ours (the
+        camera outside it: the lines' history is then dropped, so the next frame searches near
+        the car) or has a side made up at a width not `width_known`: no lane rather than a
+        wrong one."""
         cfg = self.config
         bw, bh = view.size
         lines = self._history_lane(view)
@@ -498,7 +499,7 @@ class LaneFinder:
         margin = cfg.inside_margin_m / view.xm_per_px
         painted = paint_inside(mask, left, right, margin, view.outside, along)
         if painted > cfg.max_inside_paint:
-            return None, f"paint across it ({painted:.0%} of it: a crossing, or kerb stones)"
+            return None, f"paint across it ({painted:.0%} of it: a crossing)"
         # From the live picture's bottom up to the trapezoid's top row (where the warp is sure).
         lx0, _, lx1, ly1 = view.live
         middle = (lx0 + lx1) / 2

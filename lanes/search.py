@@ -111,8 +111,8 @@ def paint_inside(
 ) -> float:
     """The share of a lane's inside (between its two lines, `margin` pixels in from each,
     outside `hidden` and twice `margin` off a line `along` it: a double line's other stripe
-    too) that the bird's-eye `mask` paints: about none on a lane, where a pedestrian
-    crossing's bars or kerb stones paint it across."""
+    too) that the bird's-eye `mask` paints: about none on a lane, which a pedestrian
+    crossing's bars paint across."""
     rows = np.arange(mask.shape[0], dtype=np.float64)
     lo = evaluate_fit(left, rows)[:, None] + margin
     hi = evaluate_fit(right, rows)[:, None] - margin
