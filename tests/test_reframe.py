@@ -290,7 +290,7 @@ def test_offset_shifts_pair_the_same_moment_across_framings() -> None:
     """The lane offset's shift is taken at the source frame each re-framed frame shows, with the
     sign flipped where mirrored (the camera is as far the other way), and only where both have a
     lane; none for a clip played backwards."""
-    reference = [
+    reference: list[dict[str, Any]] = [
         {"frame": 0, "lane": {"offset_m": 0.5}},
         {"frame": 1, "lane": {"offset_m": -0.2}},
         {"frame": 2, "lane": None},
