@@ -113,17 +113,32 @@ def paint_inside(
     outside `hidden` and twice `margin` off a line `along` it: a double line's other stripe
     too) that the bird's-eye `mask` paints: about none on a lane, which a pedestrian
     crossing's bars paint across."""
-    rows = np.arange(mask.shape[0], dtype=np.float64)
-    lo = evaluate_fit(left, rows)[:, None] + margin
-    hi = evaluate_fit(right, rows)[:, None] - margin
-    columns = np.arange(mask.shape[1], dtype=np.float64)[None, :]
-    inside = (columns > lo) & (columns < hi)
-    if along is not None:
-        inside &= np.abs(columns - evaluate_fit(along, rows)[:, None]) > 2 * margin
-    if hidden is not None:
-        inside &= ~hidden
-    area = int(inside.sum())
-    return float(np.count_nonzero(mask.astype(bool) & inside) / area) if area else 0.0
+    h, w = mask.shape
+    rows = np.arange(h, dtype=np.float64)
+    shown = np.ones((h, w), bool) if hidden is None else ~hidden
+    # Per row, the columns c with lo < c < hi: from floor(lo) + 1 up to ceil(hi), exclusive.
+    first = np.clip(np.floor(evaluate_fit(left, rows) + margin) + 1, 0, w).astype(np.intp)
+    end = np.clip(np.ceil(evaluate_fit(right, rows) - margin), 0, w).astype(np.intp)
+    end = np.maximum(end, first)
+    band = None
+    if along is not None:  # ... but those with |c - a| <= 2 margin: ceil(a - 2m) to floor(a + 2m)
+        a = evaluate_fit(along, rows)
+        b0 = np.clip(np.ceil(a - 2 * margin), first, end).astype(np.intp)
+        b1 = np.clip(np.floor(a + 2 * margin) + 1, first, end).astype(np.intp)
+        band = (b0, np.maximum(b1, b0))
+    index = np.arange(h)
+
+    def counted(pixels: NDArray[np.bool_]) -> int:
+        """The `pixels` in those columns, by row sums of each row's running count."""
+        running = np.zeros((h, w + 1), np.int32)
+        np.cumsum(pixels, axis=1, out=running[:, 1:])
+        total = running[index, end] - running[index, first]
+        if band is not None:
+            total -= running[index, band[1]] - running[index, band[0]]
+        return int(total.sum())
+
+    area = counted(shown)
+    return counted(mask.astype(bool) & shown) / area if area else 0.0
 
 
 def window_search(
