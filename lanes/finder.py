@@ -234,7 +234,7 @@ class LaneFinder:
         if lane is not None:
             rows = np.arange(view.size[1], dtype=np.float64)
             columns = np.stack([evaluate_fit(fit, rows) for fit in (lane.left_fit, lane.right_fit)])
-            half_width = max(1, round(cfg.dash_half_width_m / view.xm_per_px))
+            half_width = view.columns_for(cfg.dash_half_width_m)
             for side, painted in enumerate(painted_along(mask, columns, half_width)):
                 if cfg.dash_share[0] <= painted.mean() <= cfg.dash_share[1]:
                     ends[side] = near_ends(
@@ -278,7 +278,7 @@ class LaneFinder:
         if widths.min() <= 0 or widths.max() > (1 + cfg.sample_parallel) * widths.min():
             return None
         sample = float(widths[-1] / ((cfg.dst_right_x - cfg.dst_left_x) * bw))
-        half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
+        half_width = view.columns_for(cfg.line_width_m)
         share, coverage = paint_between(mask, left, right, MIDDLE_SHARES, half_width)
         if coverage >= cfg.middle_line_rows:
             if not MIDDLE[0] <= share <= MIDDLE[1]:
@@ -303,7 +303,7 @@ class LaneFinder:
         left, right, made_up = lines
         width_m = float(lane_widths(left, right, np.array([float(bh)]))[0] * view.xm_per_px)
         narrow = not made_up and width_m <= cfg.one_lane_max_m
-        half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
+        half_width = view.columns_for(cfg.line_width_m)
         share, coverage = paint_between(paint.mask, left, right, MIDDLE_SHARES, half_width)
         if coverage < (cfg.solid_line_rows if narrow else cfg.middle_line_rows):
             return None, None
@@ -493,7 +493,7 @@ class LaneFinder:
         if doubt is not None:
             return None, doubt
         # Paint along a line inside the lane (the astride rule's) is not paint across it.
-        half_width = max(1, round(cfg.line_width_m / view.xm_per_px))
+        half_width = view.columns_for(cfg.line_width_m)
         share, coverage = paint_between(mask, left, right, ALONG_SHARES, half_width)
         along = left + share * (right - left) if coverage >= cfg.middle_line_rows else None
         margin = cfg.inside_margin_m / view.xm_per_px

@@ -34,6 +34,10 @@ class BirdsEye:
             cv2.warpPerspective(image, self.matrix, self.size, flags=cv2.INTER_LINEAR)
         )
 
+    def columns_for(self, width_m: float) -> int:
+        """How many bird's-eye columns span `width_m` across the road (at least 1)."""
+        return max(1, round(width_m / self.xm_per_px))
+
     def pixels_for(self, area_m2: float) -> int:
         """How many bird's-eye pixels cover `area_m2` of road (at least 1)."""
         return max(1, round(area_m2 / (self.xm_per_px * self.ym_per_px)))
