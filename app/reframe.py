@@ -12,7 +12,7 @@ import copy
 import json
 import subprocess
 import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -549,19 +549,33 @@ def distance_ratios(
     return np.asarray(ratios, np.float64)
 
 
+def _at_source(
+    reference: Sequence[Mapping[str, Any]],
+    frames: Sequence[Mapping[str, Any]],
+    framing: Framing,
+    value: Callable[[Mapping[str, Any]], float | None],
+) -> list[tuple[float, float]]:
+    """(re-framed, as it is) pairs of `value` of each frame of the re-framed clip's record
+    `frames` and of the `reference` record's frame at the source frame it shows, where both
+    have one."""
+    seen = {int(r["frame"]): value(r) for r in reference}
+    pairs = []
+    for record in frames:
+        before = seen.get(framing.source_frame(int(record["frame"]), len(reference)))
+        after = value(record)
+        if before is not None and after is not None:
+            pairs.append((after, before))
+    return pairs
+
+
 def speed_ratios(
     reference: Sequence[Mapping[str, Any]], frames: Sequence[Mapping[str, Any]], framing: Framing
 ) -> NDArray[np.float64]:
     """Per frame, the speed in the re-framed clip's record `frames` over the speed in the
     `reference` record of the clip as it is at the source frame it shows: 1 where the road's
     scale and the frame rate are read right."""
-    speeds = {int(r["frame"]): r.get("speed_kmh") for r in reference}
-    ratios = []
-    for record in frames:
-        seen = speeds.get(framing.source_frame(int(record["frame"]), len(reference)))
-        if seen and record.get("speed_kmh"):
-            ratios.append(record["speed_kmh"] / seen)
-    return np.asarray(ratios, np.float64)
+    pairs = _at_source(reference, frames, framing, lambda r: r.get("speed_kmh") or None)
+    return np.asarray([after / before for after, before in pairs], np.float64)
 
 
 def offset_shifts(
@@ -574,15 +588,9 @@ def offset_shifts(
     behind)."""
     if framing.reverse:
         return np.zeros(0, np.float64)
-    offsets = {int(r["frame"]): (r.get("lane") or {}).get("offset_m") for r in reference}
     sign = -1.0 if framing.mirror else 1.0
-    shifts = []
-    for record in frames:
-        seen = offsets.get(framing.source_frame(int(record["frame"]), len(reference)))
-        framed = (record.get("lane") or {}).get("offset_m")
-        if seen is not None and framed is not None:
-            shifts.append(framed - sign * seen)
-    return np.asarray(shifts, np.float64)
+    pairs = _at_source(reference, frames, framing, lambda r: (r.get("lane") or {}).get("offset_m"))
+    return np.asarray([after - sign * before for after, before in pairs], np.float64)
 
 
 def pooled(scores: Iterable[Mapping[str, Any]], threshold: str = "iou_0.5") -> dict[str, float]:
