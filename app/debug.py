@@ -66,10 +66,11 @@ def scene_picture(
     bonnet ends it), the horizon (blue: estimated from the footage; grey: the default or
     --horizon) with the ground scale once it moved from 1 and the turn the frame was levelled
     by (`roll_deg`, stated or read), the road's vanishing point on it (a circle, once
-    estimated), the boxes of burnt-in captions (red), the road's grey level and grain once
-    measured (and that the picture is read as monochrome, where it is), and the lane dashes'
-    spacing once read with the length scale it gives (`length`, as the record's
-    `length_scale` and `dash_m`)."""
+    estimated) and the road line under the camera upright below it (dashed: the lane offset
+    and the vehicles' sides are measured from it), the boxes of burnt-in captions (red), the
+    road's grey level and grain once measured (and that the picture is read as monochrome,
+    where it is), and the lane dashes' spacing once read with the length scale it gives
+    (`length`, as the record's `length_scale` and `dash_m`)."""
     picture = frame.copy()
     x0, y0, x1, y1 = scene.live
     cv2.rectangle(picture, (x0, y0), (x1 - 1, y1 - 1), (0, 255, 0), 2)
@@ -83,7 +84,11 @@ def scene_picture(
         label += f", levelled by {roll_deg:g} deg"
     cv2.putText(picture, label, (x0 + 10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.7, color, 2)
     if scene.vanishing_x is not None:
-        cv2.circle(picture, (round(scene.vanishing_x), y), 9, color, 2, cv2.LINE_AA)
+        x = round(scene.vanishing_x)
+        cv2.circle(picture, (x, y), 9, color, 2, cv2.LINE_AA)
+        for top in range(y + 20, y1, 30):  # dashes 15 px long
+            cv2.line(picture, (x, top), (x, min(top + 15, y1 - 1)), color, 2)
+        cv2.putText(picture, "camera", (x + 8, y1 - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.6, color, 2)
     for cx0, cy0, cx1, cy1 in scene.overlays:
         cv2.rectangle(picture, (cx0, cy0), (cx1 - 1, cy1 - 1), (255, 40, 40), 2)
         cv2.putText(

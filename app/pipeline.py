@@ -504,7 +504,11 @@ class Pipeline:
                 None,
             )
             lane = self.lanes.process(
-                undistorted, **placement, vehicles=around, width_known=self._scene.lane_width_known
+                undistorted,
+                **placement,
+                vehicles=around,
+                width_known=self._scene.lane_width_known,
+                road_x=scene.vanishing_x,
             )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
@@ -617,6 +621,9 @@ class Pipeline:
             and current is not self._geometry.view
         ):
             self._geometry = RoadGeometry.of(current)
+        road_x = started.scene.vanishing_x
+        if self._geometry is not None and self._geometry.road_x != road_x:
+            self._geometry = replace(self._geometry, road_x=road_x)
         if self._facts is not None and self._geometry is not None:
             facts = self._facts.update(
                 vehicles.detections if vehicles is not None else None,

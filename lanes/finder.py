@@ -12,6 +12,7 @@ from lanes.config import LaneConfig
 from lanes.dashes import DashTrack, near_ends
 from lanes.line import Line
 from lanes.measure import (
+    camera_from,
     implausible_lane,
     lane_offset,
     lane_widths,
@@ -165,6 +166,7 @@ class LaneFinder:
         ground_scale: float = 1.0,
         vehicles: NDArray[np.float64] | None = None,
         width_known: bool = True,
+        road_x: float | None = None,
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
         from the scene's `horizon_y`, `live` box, `scale_height`, `vanishing_x` and
@@ -174,7 +176,10 @@ class LaneFinder:
         yet) a side is not made up at the standard width: one side alone is no lane.
         Paint is read through burnt-in `overlays`: a half-transparent caption leaves the paint
         under it visible, and the paint mask's opening along the road drops its letters (hiding
-        the captions' boxes lost the night clip's lane in 3 % of its frames)."""
+        the captions' boxes lost the night clip's lane in 3 % of its frames).
+        `road_x` is the column of the road's vanishing point as the scene reads it now (the
+        view is placed by it only in steps): the camera's place in the lane is read along the
+        road it gives; None: along the view's upright."""
         cfg = self.config
         view = self.view(
             (frame.shape[1], frame.shape[0]),
@@ -206,12 +211,15 @@ class LaneFinder:
             fits = [fit_line(p, bend) if ok else None for p, ok in zip(pixels, enough, strict=True)]
         sample = self._width_sample(fits, paint.mask, view)
         status = self._check_and_update(fits, pixels, view)
-        inside, astride = self._line_inside(paint, view)
+        slant = 0.0 if road_x is None else view.slant_to(road_x)
+        inside, astride = self._line_inside(paint, view, slant)
         if inside is not None:
             status = (*status, inside)
         believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
         lane, doubt = (
-            self._estimate(view, width_known, paint.mask) if astride is None else (None, astride)
+            self._estimate(view, width_known, paint.mask, slant)
+            if astride is None
+            else (None, astride)
         )
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
@@ -286,7 +294,9 @@ class LaneFinder:
             sample /= 2
         return sample * view.ground_scale
 
-    def _line_inside(self, paint: Paint, view: BirdsEye) -> tuple[str | None, str | None]:
+    def _line_inside(
+        self, paint: Paint, view: BirdsEye, slant: float
+    ) -> tuple[str | None, str | None]:
         """Where a lane line runs inside the lane the lines' history gives (a side made up at
         the standard width, or lines more than `one_lane_max_m` apart; in a narrower lane a
         solid line, `solid_line_rows`) and the camera is at least `astride_m` from it, that
@@ -294,7 +304,8 @@ class LaneFinder:
         (a thin dashed line has too little paint for a side of its own, and the side was made
         up across it; a kerb or fence was taken for a side beyond a solid edge line). A note
         of it, or None; and why there is no lane where the camera is astride a solid line
-        inside a narrow one (one of its sides is no lane line), or None."""
+        inside a narrow one (one of its sides is no lane line), or None. The road slants by
+        `slant` columns a row in the view (see `camera_from`)."""
         cfg = self.config
         bh = view.size[1]
         lines = self._history_lane(view)
@@ -308,7 +319,7 @@ class LaneFinder:
         if coverage < (cfg.solid_line_rows if narrow else cfg.middle_line_rows):
             return None, None
         curve = left + share * (right - left)
-        apart_m = (view.camera_x - float(evaluate_fit(curve, bh))) * view.xm_per_px
+        apart_m = camera_from(curve, bh, view.camera_point, slant, view.xm_per_px, view.ym_per_px)
         if abs(apart_m) < cfg.astride_m:
             if narrow:
                 return None, f"astride a solid line inside a {width_m:.1f} m lane"
@@ -464,13 +475,13 @@ class LaneFinder:
         return left, right, made_up
 
     def _estimate(
-        self, view: BirdsEye, width_known: bool, mask: NDArray[np.uint8]
+        self, view: BirdsEye, width_known: bool, mask: NDArray[np.uint8], slant: float
     ) -> tuple[LaneEstimate | None, str | None]:
         """The lane from the lines' history, or None and why when it is not one a road can have
         (too narrow or wide, not parallel, too sharp a bend, painted across), not ours (the
         camera outside it: the lines' history is then dropped, so the next frame searches near
         the car) or has a side made up at a width not `width_known`: no lane rather than a
-        wrong one."""
+        wrong one. The road slants by `slant` columns a row in the view (see `camera_from`)."""
         cfg = self.config
         bw, bh = view.size
         lines = self._history_lane(view)
@@ -518,10 +529,14 @@ class LaneFinder:
         # The mean of curvatures (not radii) so one near-straight line does not dominate.
         curvature = float(np.mean([1.0 / r for r in radii]))
         radius = reported_radius(curvature, cfg.straight_radius_m)
-        # The camera sits on its column (`BirdsEye.camera_column`); the bottom row is nearest.
-        offset = lane_offset(left, right, bh, view.camera_x, view.xm_per_px)
+        # Read where the camera is: on the road below the view's bottom row.
+        offset = lane_offset(
+            left, right, bh, view.camera_point, slant, view.xm_per_px, view.ym_per_px
+        )
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
-        if abs(offset) > cfg.max_offset_share * width:
+        # Outside once past the line's paint (its fit is the paint's middle): over it, the
+        # camera is still on the lane's edge.
+        if abs(offset) > cfg.max_offset_share * width + cfg.line_width_m / 2:
             self.left.reset()
             self.right.reset()
             return (

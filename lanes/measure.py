@@ -26,10 +26,36 @@ def reported_radius(curvature: float, straight_m: float) -> float:
     return 1.0 / curvature if curvature * straight_m > 1.0 else math.inf
 
 
-def lane_offset(left: Fit, right: Fit, y_px: float, centre_px: float, xm_per_px: float) -> float:
-    """Camera position minus lane centre in metres: positive when the car is right of centre."""
-    middle = (evaluate_fit(left, y_px) + evaluate_fit(right, y_px)) / 2
-    return float((centre_px - middle) * xm_per_px)
+def camera_from(
+    fit: Fit,
+    bottom_px: float,
+    camera: tuple[float, float],
+    slant: float,
+    xm_per_px: float,
+    ym_per_px: float,
+) -> float:
+    """Metres the camera's ground point `camera` (bird's-eye x, y) lies right of the line
+    `fit`, across the road: the line carried on from row `bottom_px` (the view's nearest) down
+    to the camera along the road, which slants by `slant` columns a row in the view (a camera
+    turned off the road's direction by less than its view is placed for: 1.5 degrees put the
+    camera 0.13 m off where read straight down from the bottom row, 4 m ahead of it)."""
+    x = float(evaluate_fit(fit, bottom_px))
+    across = camera[0] - (x + slant * (camera[1] - bottom_px))
+    return across * xm_per_px / math.hypot(1.0, slant * xm_per_px / ym_per_px)
+
+
+def lane_offset(
+    left: Fit,
+    right: Fit,
+    bottom_px: float,
+    camera: tuple[float, float],
+    slant: float,
+    xm_per_px: float,
+    ym_per_px: float,
+) -> float:
+    """Camera position minus lane centre in metres: positive when the car is right of centre
+    (the centre line read at the camera, see `camera_from`)."""
+    return camera_from((left + right) / 2, bottom_px, camera, slant, xm_per_px, ym_per_px)
 
 
 def lane_widths(left: Fit, right: Fit, rows: np.ndarray) -> np.ndarray:

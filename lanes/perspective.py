@@ -71,12 +71,23 @@ class BirdsEye:
         return (lx0 + lx1) / 2 if self.vanishing_x is None else self.vanishing_x
 
     @functools.cached_property
+    def camera_point(self) -> tuple[float, float]:
+        """The camera's ground point (the road under it) in the bird's-eye view, below its
+        bottom row: where every upright line of the picture meets once warped (a level camera's
+        vertical vanishing point, taken at infinity). Its column is `camera_column`'s."""
+        x, y, z = self.matrix @ np.array([0.0, 1.0, 0.0])
+        return float(x / z), float(y / z)
+
+    def slant_to(self, column: float) -> float:
+        """Columns a row by which road lines running to the vanishing point at frame `column`
+        on the view's horizon slant in the view: 0 at the view's own (placed) column."""
+        dx, dy, _ = self.matrix @ np.array([column, self.horizon_y, 1.0])
+        return float(dx / dy)
+
+    @property
     def camera_x(self) -> float:
-        """The bird's-eye column of the camera: its `camera_column` at the view's bottom row
-        (the nearest road)."""
-        bw, bh = self.size
-        bottom = float(self.to_frame(np.array([[bw / 2, float(bh)]]))[0, 1])
-        return float(self.to_birdseye(np.array([[self.camera_column, bottom]]))[0, 0])
+        """The bird's-eye column of the camera (see `camera_point`)."""
+        return self.camera_point[0]
 
     def covered(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_] | None:
         """The bird's-eye pixels under any of the frame's `boxes` (n, 4: x0, y0, x1, y1), their

@@ -65,15 +65,21 @@ def test_flat_road_distance_and_lateral_from_the_warp() -> None:
     assert np.isinf(geometry.distance(np.array([cy - 10.0])))[0]  # above the horizon
 
 
-def test_a_camera_turned_sideways_reads_where_vehicles_are_beside_it() -> None:
+@pytest.mark.parametrize("turn_deg", [3.0, 1.5])
+def test_a_camera_turned_sideways_reads_where_vehicles_are_beside_it(turn_deg: float) -> None:
     """Road points on the right line of a lane a camera 0.4 m right of its centre sees, turned 3
     degrees right: 1.45 m to its right (within 3 %) at 8-60 m, and a car there in the right
     lane, one on the camera's line in ours. From the picture's middle they read 0.5 m
-    further right at 10 m and 2.7 m further at 60 m (the right lane's car then 'other')."""
-    camera = road_camera(3.0, 0.4)
+    further right at 10 m and 2.7 m further at 60 m (the right lane's car then 'other').
+    Turned 1.5 degrees the view is not placed by the vanishing point (within 3 % of the
+    width): read along the road's column as the scene reads it, the same; along the view's
+    upright the point at 60 m read 1.6 m left of where it is (0.2 m at 8 m)."""
+    camera = road_camera(turn_deg, 0.4)
     _, vanishing_x = seen_road([], camera)
-    view = birdseye_for((1280, 720), LaneConfig(), horizon_y=420.0, vanishing_x=vanishing_x)
-    geometry = RoadGeometry.of(view)
+    placed = vanishing_x if abs(vanishing_x - 640) > 0.03 * 1280 else None
+    assert (placed is None) == (turn_deg < 2)
+    view = birdseye_for((1280, 720), LaneConfig(), horizon_y=420.0, vanishing_x=placed)
+    geometry = replace(RoadGeometry.of(view), road_x=vanishing_x)
     z = np.array([8.0, 15.0, 30.0, 60.0])
     seen = (camera @ np.stack([np.full_like(z, 1.85), z, np.ones_like(z)])).T
     points = seen[:, :2] / seen[:, 2:]

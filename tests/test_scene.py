@@ -489,7 +489,8 @@ def test_debug_of_an_unknown_camera_runs_long_enough_to_place_its_stages(
 
 def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     """The ground scale is drawn with the horizon once it moved from the tuned camera's 1, and
-    so is a turn the frame was levelled by; the dashes' spacing and length scale once read."""
+    so is a turn the frame was levelled by; the dashes' spacing and length scale once read;
+    the road line under the camera once the vanishing point is."""
     from dataclasses import replace
 
     from app.debug import scene_picture
@@ -507,6 +508,13 @@ def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     assert not tuned[top].any()
     read = scene_picture(frame, scene, 0.0, (0.79, 15.5))
     assert read[top].any() and np.array_equal(read[label], tuned[label])
+    # The road line under the camera: dashed, upright below the vanishing point, once read.
+    below = (slice(180, 300), slice(5, 635))  # inside the live box's green sides
+    assert not tuned[below].any()
+    pointed = scene_picture(frame, replace(scene, vanishing_x=250.0))[below]
+    columns = 5 + np.flatnonzero(pointed.any(axis=(0, 2)))
+    assert columns.min() >= 248 and columns.max() <= 252
+    assert 0.3 < pointed[:, 245].any(axis=1).mean() < 0.7  # dashed
 
 
 def test_the_road_ahead_is_measured_for_its_lightness_not_the_sky_or_bonnet() -> None:
