@@ -822,24 +822,37 @@ def test_the_lane_keeps_its_dashes_where_the_edge_line_turns_off_along_an_exit()
 LANE_LINES = [(-1.925, -1.775, 1.0, 150.0), (1.775, 1.925, 1.0, 150.0)]  # a 3.7 m lane's
 
 
-@pytest.mark.parametrize("turn_deg", [-6.0, -3.0, -1.5, 0.0, 1.0, 2.0, 3.0, 6.0])
-def test_a_camera_turned_sideways_reads_its_place_in_the_lane(turn_deg: float) -> None:
+@pytest.mark.parametrize(
+    ("turn_deg", "horizon_y", "camera_m"),
+    [
+        *((turn, 420.0, 0.4) for turn in (-6.0, -3.0, -1.5, 0.0, 1.0, 2.0, 3.0, 6.0)),
+        (-3.0, 250.0, -1.0),
+        (1.5, 250.0, 0.4),
+        (3.0, 300.0, -1.0),
+    ],
+)
+def test_a_camera_turned_sideways_reads_its_place_in_the_lane(
+    turn_deg: float, horizon_y: float, camera_m: float
+) -> None:
     """A camera 0.4 m right of its lane's centre, turned up to 6 degrees sideways (the road's
     vanishing point up to 105 px off the picture's middle, where the scene finds it; the view
     placed by it as the scene places it, in steps of 3 % of the width, so not for 2 degrees):
     the lane offset reads 0.4 m (within 5 cm) and its width 3.7 m, read along the road the
-    vanishing point gives. Read from the picture's middle it was 0.66 m turned 3 degrees
-    right, 0.15 m turned 3 degrees left, 0.91 m at 6 degrees; straight down the view where it
-    is not placed for the turn (the lane slanting in it), 0.49 m turned 1 degree right and
-    0.24 m 2 degrees left."""
-    frame, vanishing_x = seen_road(LANE_LINES, road_camera(turn_deg, 0.4))
+    vanishing point gives; so too 1 m left of the centre, and pitched further down (the
+    horizon at row 250 or 300 rather than 420: the point under the camera is nearer the
+    picture). Read from the picture's middle it was 0.66 m turned 3 degrees right, 0.15 m
+    turned 3 degrees left, 0.91 m at 6 degrees; straight down the view where it is not placed
+    for the turn (the lane slanting in it), 0.49 m turned 1 degree right and 0.24 m 2 degrees
+    left."""
+    camera = road_camera(turn_deg, camera_m, horizon_y=horizon_y)
+    frame, vanishing_x = seen_road(LANE_LINES, camera, horizon_y)
     placed = vanishing_x if abs(vanishing_x - 640) > 0.03 * 1280 else None
     assert placed is not None or abs(turn_deg) < 2.5
     finder = LaneFinder(LaneConfig())
     for _ in range(3):
-        result = finder.process(frame, horizon_y=420.0, vanishing_x=placed, road_x=vanishing_x)
+        result = finder.process(frame, horizon_y=horizon_y, vanishing_x=placed, road_x=vanishing_x)
     assert result.lane is not None, result.status
-    assert result.lane.offset_m == pytest.approx(0.4, abs=0.05)
+    assert result.lane.offset_m == pytest.approx(camera_m, abs=0.05)
     assert result.lane.width_m == pytest.approx(3.7, abs=0.1)
     view = finder.current_view
     assert view is not None and view.camera_column == (640.0 if placed is None else placed)
