@@ -14,7 +14,6 @@ from lanes.line import Line
 from lanes.measure import (
     camera_from,
     implausible_lane,
-    lane_offset,
     lane_widths,
     radius_of_curvature,
     reported_radius,
@@ -529,9 +528,10 @@ class LaneFinder:
         # The mean of curvatures (not radii) so one near-straight line does not dominate.
         curvature = float(np.mean([1.0 / r for r in radii]))
         radius = reported_radius(curvature, cfg.straight_radius_m)
-        # Read where the camera is: on the road below the view's bottom row.
-        offset = lane_offset(
-            left, right, bh, view.camera_point, slant, view.xm_per_px, view.ym_per_px
+        # Camera minus lane centre (positive right of it), read where the camera is: on the
+        # road below the view's bottom row.
+        offset = camera_from(
+            (left + right) / 2, bh, view.camera_point, slant, view.xm_per_px, view.ym_per_px
         )
         width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
         # Outside once past the line's paint (its fit is the paint's middle): over it, the

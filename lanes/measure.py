@@ -44,20 +44,6 @@ def camera_from(
     return across * xm_per_px / math.hypot(1.0, slant * xm_per_px / ym_per_px)
 
 
-def lane_offset(
-    left: Fit,
-    right: Fit,
-    bottom_px: float,
-    camera: tuple[float, float],
-    slant: float,
-    xm_per_px: float,
-    ym_per_px: float,
-) -> float:
-    """Camera position minus lane centre in metres: positive when the car is right of centre
-    (the centre line read at the camera, see `camera_from`)."""
-    return camera_from((left + right) / 2, bottom_px, camera, slant, xm_per_px, ym_per_px)
-
-
 def lane_widths(left: Fit, right: Fit, rows: np.ndarray) -> np.ndarray:
     """Right minus left x at the given rows, in bird's-eye pixels."""
     return evaluate_fit(right, rows) - evaluate_fit(left, rows)
