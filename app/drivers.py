@@ -17,7 +17,7 @@ import numpy as np
 from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
-from app.mounting import Mounting, check_mounting, video_mounting
+from app.mounting import Mounting, aim_note, check_mounting, video_mounting
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
@@ -327,10 +327,14 @@ def process_video(
         # camera starting up shows none at first.
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         scales: list[float] = []  # the lanes' ground scale at each frame
+        aims: list[float] = []  # the vanishing point's column off the live middle, in widths
         for offset, out in enumerate(pipeline.stream(decoded)):
             index = first + offset
-            if out.result.scene is not None:
-                scales.append(out.result.scene.ground_scale)
+            if (scene := out.result.scene) is not None:
+                scales.append(scene.ground_scale)
+                if scene.vanishing_x is not None:
+                    x0, _, x1, _ = scene.live
+                    aims.append((scene.vanishing_x - (x0 + x1) / 2) / max(1, x1 - x0))
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:
@@ -371,6 +375,8 @@ def process_video(
             log(f"note: {source.name}: {height}")
         if (dashes := pipeline.dash_note()) is not None:
             log(f"note: {source.name}: {dashes}")
+        if (aim := aim_note(float(np.median(aims)) if aims else None)) is not None:
+            log(f"note: {source.name}: {aim}")
         events = tuple(pipeline.finish_events())
         if events_file is not None:
             event_sink = sinks.enter_context(RecordSink(events_file))

@@ -99,6 +99,24 @@ def camera_height_note(
     )
 
 
+def aim_note(column_share: float | None, least: float = 0.04) -> str | None:
+    """What a user should hear where the road's vanishing point lies well off the picture's
+    middle over the footage (`column_share`: the median of its column's distance from the live
+    picture's middle, over the live width; positive right): the camera looks to the road's
+    other side, or the picture is cut off-centre. The lanes and the vehicles' sides are read
+    along the road either way, but the side it lies towards is seen less far. None within
+    `least` of the middle (a bend ahead moves it by a few per cent) or where it was not found."""
+    if column_share is None or abs(column_share) <= least:
+        return None
+    side, looks = ("left", "right") if column_share < 0 else ("right", "left")
+    return (
+        f"its road runs towards a point {abs(column_share):.0%} of the width {side} of the "
+        f"picture's middle: the camera looks {looks} of the road (or the picture is cut "
+        f"off-centre); lanes and the vehicles' sides are read along the road, but less of its "
+        f"{side} side is seen: aim the camera along the road to see both sides alike"
+    )
+
+
 def dash_note(
     length_scale: float, read_m: float | None, implausible_m: float | None, spacing_m: float
 ) -> str | None:

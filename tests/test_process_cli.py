@@ -254,6 +254,32 @@ def test_lanes_read_from_another_height_suggest_the_camera_height(
     assert lower is not None and "1.0 m over" in lower and "mounted lower" in lower
 
 
+def test_a_camera_looking_off_the_road_is_told_which_way(
+    wild_dir: Path, test_video: Path, tmp_path: Path
+) -> None:
+    """The wet rural road vanishes 10 % of the width right of its picture's middle (its camera
+    looks left of the road): `process` says so, and which side is seen less far. The shipped
+    camera's clip (its road within 1.3 % of the middle) hears nothing of it."""
+    from app.mounting import aim_note
+
+    rural = wild_dir / "rural_2lane_wet.mp4"
+    untold = run_cli(
+        "process", rural, "-o", tmp_path / "r.mp4", "--end", "3", "--calibration", "none"
+    )
+    tuned = run_cli("process", test_video, "-o", tmp_path / "t.mp4")
+    assert untold.returncode == 0 and tuned.returncode == 0, untold.stderr + tuned.stderr
+    said = re.search(
+        r"runs towards a point (\d+)% of the width (\w+) of", untold.stdout + untold.stderr
+    )
+    assert said and 8 <= int(said.group(1)) <= 13 and said.group(2) == "right", untold.stdout
+    assert "camera looks left of the road" in untold.stdout + untold.stderr
+    assert "runs towards a point" not in tuned.stdout + tuned.stderr
+    # Within a bend's few per cent of the middle, or not found: nothing to say.
+    assert aim_note(0.03) is None and aim_note(None) is None
+    left = aim_note(-0.14)
+    assert left is not None and "14% of the width left" in left and "looks right" in left
+
+
 @pytest.mark.slow
 def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: Path) -> None:
     """project_cut_1 as a camera turned 3 degrees anticlockwise about its axis films it (each
