@@ -84,11 +84,6 @@ class BirdsEye:
         dx, dy, _ = self.matrix @ np.array([column, self.horizon_y, 1.0])
         return float(dx / dy)
 
-    @property
-    def camera_x(self) -> float:
-        """The bird's-eye column of the camera (see `camera_point`)."""
-        return self.camera_point[0]
-
     def covered(self, boxes: NDArray[np.floating]) -> NDArray[np.bool_] | None:
         """The bird's-eye pixels under any of the frame's `boxes` (n, 4: x0, y0, x1, y1), their
         parts below the horizon (above it the ground plane has no points); None without."""

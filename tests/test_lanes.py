@@ -472,7 +472,8 @@ def test_no_lane_is_drawn_across_a_line_the_camera_is_off(
                 found.debug.mask, lane.left_fit, lane.right_fit, MIDDLE_SHARES, half_width
             )
             inside = lane.left_fit + share * (lane.right_fit - lane.left_fit)
-            apart_m = (view.camera_x - np.polyval(inside, view.size[1])) * view.xm_per_px
+            camera_x = view.camera_point[0]
+            apart_m = (camera_x - np.polyval(inside, view.size[1])) * view.xm_per_px
             if coverage >= config.middle_line_rows and abs(apart_m) >= config.astride_m:
                 across.append(k)
     assert len(across) <= 2, across
