@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.sources import VideoInfo, probe_video, read_frames
+from camera_cal.scene import SceneTracker
 
 
 def interruptible() -> None:
@@ -216,6 +217,14 @@ def road_camera(
     )
     lens = np.array([[focal_px, 0.0, cx], [0.0, focal_px, cy], [0.0, 0.0, 1.0]])
     return np.asarray(lens @ pitched @ ground, np.float64)
+
+
+def placed_column(vanishing_x: float, width: int = 1280) -> float | None:
+    """The column a scene places the lane view on for a road vanishing at `vanishing_x` of a
+    picture `width` wide: None (the picture's middle) within its placement step (`settle_x`
+    of the width) of the middle, as `SceneTracker` places it."""
+    step = SceneTracker((width, 720), 420.0).settle_x * width
+    return vanishing_x if abs(vanishing_x - width / 2) > step else None
 
 
 def seen_road(

@@ -22,6 +22,7 @@ from lanes.threshold import lane_mask
 from tests.helpers import (
     dashed_road,
     moving_road,
+    placed_column,
     process_clip,
     read_record,
     road_camera,
@@ -76,7 +77,7 @@ def test_a_camera_turned_sideways_reads_where_vehicles_are_beside_it(turn_deg: f
     upright the point at 60 m read 1.6 m left of where it is (0.2 m at 8 m)."""
     camera = road_camera(turn_deg, 0.4)
     _, vanishing_x = seen_road([], camera)
-    placed = vanishing_x if abs(vanishing_x - 640) > 0.03 * 1280 else None
+    placed = placed_column(vanishing_x)
     assert (placed is None) == (turn_deg < 2)
     view = birdseye_for((1280, 720), LaneConfig(), horizon_y=420.0, vanishing_x=placed)
     geometry = replace(RoadGeometry.of(view), road_x=vanishing_x)
