@@ -77,7 +77,9 @@ class LaneResult:
     # The lane's width this frame (its two lines fitted and parallel, whether believed or not)
     # against the tuned camera's at the same rows: what the scene learns the ground scale from.
     width_sample: float | None = None
-    width_believed: bool = False  # both lines of that sample passed the checks this frame
+    # Both lines of that sample passed the checks this frame, and it is their lane's width, not
+    # half of a lane of two (the lane drawn is not one of those halves).
+    width_believed: bool = False
     # The spacings of the dashes along this frame's dashed lines, in the view's metres (see
     # lanes/dashes.py): a lens other than the one the view assumes reads them longer or shorter.
     dash_spacings: tuple[float, ...] = ()
@@ -208,13 +210,18 @@ class LaneFinder:
             fits = list(fit_lane(pixels[0], pixels[1], bh, outlier, self._prior(bh), bend))
         else:
             fits = [fit_line(p, bend) if ok else None for p, ok in zip(pixels, enough, strict=True)]
-        sample = self._width_sample(fits, paint.mask, view)
+        sample, two_lanes = self._width_sample(fits, paint.mask, view)
         status = self._check_and_update(fits, pixels, view)
         slant = 0.0 if road_x is None else view.slant_to(road_x)
         inside, astride = self._line_inside(paint, view, slant)
         if inside is not None:
             status = (*status, inside)
-        believed = sample is not None and self.left.misses == 0 and self.right.misses == 0
+        believed = (
+            sample is not None
+            and not two_lanes
+            and self.left.misses == 0
+            and self.right.misses == 0
+        )
         lane, doubt = (
             self._estimate(view, width_known, paint.mask, slant)
             if astride is None
@@ -271,27 +278,28 @@ class LaneFinder:
 
     def _width_sample(
         self, fits: list[Fit | None], mask: NDArray[np.uint8], view: BirdsEye
-    ) -> float | None:
+    ) -> tuple[float | None, bool]:
         """This frame's lane width against the tuned camera's (see `LaneResult.width_sample`):
         the two lines' distance at the nearest row over the lane's columns in the view, times
-        the view's ground scale; half of it when a line runs midway between them (two lanes).
-        None unless both lines were fitted and run parallel (within `sample_parallel`)."""
+        the view's ground scale; half of it when a line runs midway between them (two lanes),
+        and whether it is such a half. None unless both lines were fitted and run parallel
+        (within `sample_parallel`)."""
         cfg = self.config
         left, right = fits
         if left is None or right is None:
-            return None
+            return None, False
         bw, bh = view.size
         widths = lane_widths(left, right, np.array([0.0, bh / 2, float(bh)]))
         if widths.min() <= 0 or widths.max() > (1 + cfg.sample_parallel) * widths.min():
-            return None
+            return None, False
         sample = float(widths[-1] / ((cfg.dst_right_x - cfg.dst_left_x) * bw))
         half_width = view.columns_for(cfg.line_width_m)
         share, coverage = paint_between(mask, left, right, MIDDLE_SHARES, half_width)
         if coverage >= cfg.middle_line_rows:
             if not MIDDLE[0] <= share <= MIDDLE[1]:
-                return None  # a line well off the middle: which part is a lane is unclear
-            sample /= 2
-        return sample * view.ground_scale
+                return None, False  # a line well off the middle: which lane is unclear
+            return sample / 2 * view.ground_scale, True
+        return sample * view.ground_scale, False
 
     def _line_inside(
         self, paint: Paint, view: BirdsEye, slant: float
