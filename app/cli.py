@@ -518,6 +518,13 @@ def debug_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
+    from_start: Annotated[
+        bool,
+        typer.Option(
+            help="Run the clip from its first frame, so the chosen frames are as 'process' "
+            "made them (the scales learned, the tracks; default: from 6 s before them)."
+        ),
+    ] = False,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
@@ -547,6 +554,7 @@ def debug_command(
         log=lambda m: typer.echo(m, err=True),
         calibration_required=_named(calibration),
         max_size=_max_size(max_size),
+        from_start=from_start,
     )
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 

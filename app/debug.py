@@ -176,6 +176,27 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
     return pictures
 
 
+def lane_line(out: FrameOutput) -> str:
+    """The lane a frame drew, as its record reads it, or why there is none; and the ground
+    scale where it moved (what the frame's pictures were made with)."""
+    found = out.result.lane
+    lane = None if found is None else found.lane
+    if lane is not None:
+        side = "right" if lane.offset_m >= 0 else "left"
+        text = (
+            f"lane {lane.width_m:.2f} m wide, the camera {abs(lane.offset_m):.2f} m {side} of "
+            "its centre"
+        )
+    elif found is not None and (doubts := [n for n in found.status if n.startswith("no lane")]):
+        text = doubts[-1]
+    else:
+        text = "no lane"
+    scene = out.result.scene
+    if scene is not None and scene.ground_scale != 1.0:
+        text += f"; ground scale {scene.ground_scale:.3f}"
+    return text
+
+
 def contact_sheet(frames: list[int], names: list[str]) -> str:
     """An index.html that steps through frames (buttons or arrow keys) showing every picture."""
     data = json.dumps({"frames": frames, "names": names})
@@ -217,11 +238,14 @@ def run_debug(
     log: Callable[[str], None] = print,
     calibration_required: bool = True,
     max_size: int = 0,
+    from_start: bool = False,
 ) -> list[Path]:
     """Process the clip up to the chosen frames and write their intermediates; returns files.
     The pipeline's calibration is left out for a clip of another aspect ratio unless
     `calibration_required` (see `calibration_for`); a clip whose shorter side exceeds
-    `max_size` pixels (0: none) is seen at that size, as `process` sees it."""
+    `max_size` pixels (0: none) is seen at that size, as `process` sees it. The clip is run
+    from `WARMUP_S` before the first chosen frame, or `from_start`: then every history (the
+    ground and length scales, the lines', the tracks') is the one `process` had there."""
     info = within_size(probe_video(source), max_size)
     for note in decoding_notes(info):
         log(f"note: {source.name}: {note}")
@@ -233,7 +257,7 @@ def run_debug(
         raise InputError(f"--frames starts at {first} but {source} has {info.n_frames} frames")
     last = min(last, info.n_frames)
     ensure_writable_dir(out_dir)
-    start = max(0, first - round(WARMUP_S * info.fps))
+    start = 0 if from_start else max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)
     look_ahead(pipeline, source, info, start, last)
     annotators = default_annotators(insets=True)
@@ -260,7 +284,7 @@ def run_debug(
         names = list(pictures)
         done.append(index)
         shot = f" (shot {out.result.shot} of the edited footage)" if out.result.shot else ""
-        log(f"frame {index}: {len(pictures)} pictures{shot}")
+        log(f"frame {index}: {len(pictures)} pictures{shot}; {lane_line(out)}")
     index_path = out_dir / "index.html"
     index_path.write_text(contact_sheet(done, names))
     written.append(index_path)

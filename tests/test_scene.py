@@ -487,6 +487,45 @@ def test_debug_of_an_unknown_camera_runs_long_enough_to_place_its_stages(
     assert any(400 <= r <= 426 for r in rows)
 
 
+@pytest.mark.slow
+def test_debug_from_the_start_steps_to_a_frame_as_process_made_it(
+    wild_dir: Path, tmp_path: Path
+) -> None:
+    """India's ground scale is learned at 10.5 s from 10 s of lane widths: stepping to frame 400
+    (16 s) after the usual 6 s run-in starts another history, but `--from-start` runs the clip
+    from its first frame, so the lane it logs is the one the record has there, read at the
+    same ground scale."""
+    import re
+
+    video = wild_dir / "india_highway_wildfilms.mp4"
+    rows = process_clip(video, tmp_path, "--calibration", "none", "--end", "16.1")
+    result = run_cli(
+        "debug",
+        video,
+        "--frames",
+        "400:402",
+        "--out",
+        tmp_path / "dbg",
+        "--calibration",
+        "none",
+        "--from-start",
+    )
+    assert result.returncode == 0, result.stderr
+    logged = re.findall(
+        r"frame (\d+): .*lane ([\d.]+) m wide, the camera ([\d.]+) m (left|right) of its "
+        r"centre; ground scale ([\d.]+)",
+        result.stderr,
+    )
+    assert [int(f[0]) for f in logged] == [400, 401], result.stderr
+    for frame, width, apart, side, scale in logged:
+        lane = rows[int(frame)]["lane"]
+        assert lane is not None
+        assert float(width) == pytest.approx(lane["width_m"], abs=0.006)
+        offset = float(apart) * (1 if side == "right" else -1)
+        assert offset == pytest.approx(lane["offset_m"], abs=0.006)
+        assert float(scale) == pytest.approx(rows[int(frame)]["ground_scale"], abs=0.0006)
+
+
 def test_the_debug_scene_picture_labels_a_learned_ground_scale() -> None:
     """The ground scale is drawn with the horizon once it moved from the tuned camera's 1, and
     so is a turn the frame was levelled by; the dashes' spacing and length scale once read;
