@@ -89,6 +89,11 @@ def draw_boxes(
         _label(frame, text, x1, y1, color)
 
 
+def offset_words(offset_m: float) -> str:
+    """The camera's place in its lane as the panel says it: metres left or right of centre."""
+    return f"{abs(offset_m):.2f} m {'right' if offset_m > 0 else 'left'} of centre"
+
+
 def hud_lines(
     lane: LaneEstimate | None, vehicles: int | None, fps: float, speed_kmh: float | None = None
 ) -> list[str]:
@@ -98,9 +103,8 @@ def hud_lines(
         lines.append("Lane: searching")
     else:
         radius = "straight" if math.isinf(lane.curvature_m) else f"{lane.curvature_m:,.0f} m"
-        side = "right" if lane.offset_m > 0 else "left"
         lines.append(f"Radius of curvature: {radius}")
-        lines.append(f"Offset: {abs(lane.offset_m):.2f} m {side} of centre")
+        lines.append(f"Offset: {offset_words(lane.offset_m)}")
     if vehicles is not None:
         lines.append(f"Vehicles in view: {vehicles}")
     if fps > 0:

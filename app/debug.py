@@ -11,7 +11,14 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from app.annotators import BoxAnnotator, compose, default_annotators, heat_picture, lane_inset
+from app.annotators import (
+    BoxAnnotator,
+    compose,
+    default_annotators,
+    heat_picture,
+    lane_inset,
+    offset_words,
+)
 from app.drivers import camera_for, look_ahead
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
@@ -182,11 +189,7 @@ def lane_line(out: FrameOutput) -> str:
     found = out.result.lane
     lane = None if found is None else found.lane
     if lane is not None:
-        side = "right" if lane.offset_m >= 0 else "left"
-        text = (
-            f"lane {lane.width_m:.2f} m wide, the camera {abs(lane.offset_m):.2f} m {side} of "
-            "its centre"
-        )
+        text = f"lane {lane.width_m:.2f} m wide, the camera {offset_words(lane.offset_m)}"
     elif found is not None and (doubts := [n for n in found.status if n.startswith("no lane")]):
         text = doubts[-1]
     else:

@@ -512,7 +512,7 @@ def test_debug_from_the_start_steps_to_a_frame_as_process_made_it(
     )
     assert result.returncode == 0, result.stderr
     logged = re.findall(
-        r"frame (\d+): .*lane ([\d.]+) m wide, the camera ([\d.]+) m (left|right) of its "
+        r"frame (\d+): .*lane ([\d.]+) m wide, the camera ([\d.]+) m (left|right) of "
         r"centre; ground scale ([\d.]+)",
         result.stderr,
     )
