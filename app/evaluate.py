@@ -118,6 +118,8 @@ class FrameMatch:
     false_positives: int
     false_negatives: int
     ious: tuple[float, ...]
+    # (detection, labelled vehicle) index pairs of the true positives.
+    pairs: tuple[tuple[int, int], ...] = ()
 
 
 def match_frame(
@@ -135,6 +137,7 @@ def match_frame(
     used_d: set[int] = set()
     used_t: set[int] = set()
     tp_ious: list[float] = []
+    matched: list[tuple[int, int]] = []
     for value, i, j in pairs:
         if value < threshold:
             break
@@ -144,9 +147,10 @@ def match_frame(
         used_t.add(j)
         if not truth[j].ignore:
             tp_ious.append(value)
+            matched.append((i, j))
     fp = len(detections) - len(used_d)
     fn = sum(1 for j, t in enumerate(truth) if not t.ignore and j not in used_t)
-    return FrameMatch(len(tp_ious), fp, fn, tuple(tp_ious))
+    return FrameMatch(len(tp_ious), fp, fn, tuple(tp_ious), tuple(matched))
 
 
 def _lane_x(polyline: Sequence[Sequence[float]] | None, row: int) -> float | None:
@@ -237,16 +241,24 @@ def _vehicle_scores(
     scored: Sequence[int],
     thresholds: Sequence[float],
 ) -> dict[str, Any]:
-    """Precision, recall, false positives per frame and mean IoU at each IoU threshold."""
+    """Precision, recall, false positives per frame and mean IoU at each IoU threshold, and
+    the id switches: how often a labelled vehicle is matched by a track of another id than
+    at its last match (a vehicle that should keep one number while in view)."""
     vehicle_scores: dict[str, Any] = {}
     for threshold in thresholds:
-        tp = fp = fn = 0
+        tp = fp = fn = switches = 0
         ious: list[float] = []
+        last_id: dict[int, int] = {}  # labelled vehicle -> the track id that last matched it
         for frame in scored:
-            dets = [v["box"] for v in (by_frame.get(frame, {}).get("vehicles") or [])]
-            m = match_frame(dets, labels[frame].vehicles, threshold)
+            found = by_frame.get(frame, {}).get("vehicles") or []
+            truth = labels[frame].vehicles
+            m = match_frame([v["box"] for v in found], truth, threshold)
             tp, fp, fn = tp + m.true_positives, fp + m.false_positives, fn + m.false_negatives
             ious.extend(m.ious)
+            for i, j in m.pairs:
+                track = int(found[i].get("id", -1))
+                switches += last_id.get(truth[j].id, track) != track
+                last_id[truth[j].id] = track
         vehicle_scores[f"iou_{threshold:g}"] = {
             "precision": tp / (tp + fp) if tp + fp else 1.0,
             "recall": tp / (tp + fn) if tp + fn else 1.0,
@@ -255,6 +267,7 @@ def _vehicle_scores(
             "true_positives": tp,
             "false_positives": fp,
             "false_negatives": fn,
+            "id_switches": switches,
         }
     return vehicle_scores
 
@@ -307,7 +320,8 @@ def format_report(scores: Mapping[str, Any]) -> str:
         lines.append(
             f"  {name:8s} precision {v['precision']:.3f}  recall {v['recall']:.3f}  "
             f"FP/frame {v['false_positives_per_frame']:.3f}  mean IoU {v['mean_iou']:.3f}  "
-            f"(TP {v['true_positives']}, FP {v['false_positives']}, FN {v['false_negatives']})"
+            f"(TP {v['true_positives']}, FP {v['false_positives']}, FN {v['false_negatives']}; "
+            f"id switches {v['id_switches']})"
         )
     lane = scores["lane"]
     if lane is None:

@@ -59,6 +59,24 @@ def test_perfect_record_scores_perfectly(labels: dict[int, FrameLabels]) -> None
     assert scores["frames_scored"] == 28
 
 
+def test_id_switches_count_a_vehicle_matched_by_another_track(
+    labels: dict[int, FrameLabels],
+) -> None:
+    """A labelled vehicle's track id changing between its matches is one switch each time; a
+    record that keeps each vehicle's id has none."""
+    records = _perfect_record(labels)
+    assert evaluate(labels, records)["vehicles"]["iou_0.5"]["id_switches"] == 0
+    frames = [r for r in records if r["frame"] >= 10 and r["vehicles"]]
+    first = frames[0]["vehicles"][0]["id"]
+    for record in frames[len(frames) // 2 :]:  # its second half under another id
+        for vehicle in record["vehicles"]:
+            if vehicle["id"] == first:
+                vehicle["id"] = 99
+    scores = evaluate(labels, records)["vehicles"]
+    assert scores["iou_0.5"]["id_switches"] == 1
+    assert scores["iou_0.5"]["recall"] == 1.0  # a switch costs no match
+
+
 def test_empty_record_scores_zero_recall(labels: dict[int, FrameLabels]) -> None:
     empty: list[dict[str, Any]] = [{"frame": f, "vehicles": [], "lane": None} for f in labels]
     scores = evaluate(labels, empty)
