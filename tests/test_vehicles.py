@@ -585,6 +585,90 @@ def test_track_ids_count_shown_vehicles_only() -> None:
     assert sorted(shown.ids.tolist()) == [1, 2]  # the second vehicle shown is 2, not 5
 
 
+def test_a_vehicle_lost_for_a_while_keeps_its_id_where_it_would_have_driven() -> None:
+    """A car unseen longer than a track coasts (dropped) is given its id back when found again
+    where its motion could have brought it, within `forget_missed` frames; a car found
+    elsewhere, found later, or one coming in where another left the picture gets a new id."""
+    picture = (0.0, 0.0, 1280.0, 720.0)
+
+    def tracker() -> Tracker:
+        return Tracker(
+            plain_tracking(
+                confirm_frames=3,
+                max_missed=4,
+                show_missed=2,
+                forget_missed=20,
+                velocity_gain=0.3,
+                min_inside=0.9,
+            )
+        )
+
+    def ids_after(gap: int, found_off: float = 0.0, speed_up: float = 1.0) -> list[list[int]]:
+        """A car we pass, 8 px a frame to the left, hidden from frame 10 for `gap` frames and
+        found `found_off` px right of where it is, moving `speed_up` times as fast since."""
+        follow = tracker()
+        seen = []
+        for frame in range(40):
+            hidden = max(0, min(frame, 10 + gap) - 10)
+            x = 600.0 - 8 * (frame - hidden) - 8 * speed_up * hidden
+            x += found_off if frame >= 10 + gap else 0.0
+            box = np.array([[x, 400, x + 90, 460]])
+            if 10 <= frame < 10 + gap:
+                box = np.zeros((0, 4))  # behind glare
+            shown = follow.update(Detections.from_boxes(box, np.ones(len(box))), picture)
+            seen.append(sorted(shown.ids.tolist()))
+        return seen
+
+    rejoined = ids_after(12)
+    assert rejoined[9] == [1] and rejoined[14] == []  # not shown while unseen
+    assert rejoined[-1] == [1] and all(i in ([], [1]) for i in rejoined)
+    assert ids_after(12, found_off=-25.0)[-1] == [1]  # the heat's reach a little off
+    assert ids_after(12, speed_up=1.8)[-1] == [1]  # nearing us, it crossed faster
+    assert ids_after(12, speed_up=0.0)[-1] == [1]  # held back: found where it was lost
+    assert ids_after(12, found_off=300.0)[-1] == [2]  # another car, elsewhere
+    assert ids_after(19)[-1] == [2]  # found after it was forgotten
+    assert ids_after(3)[-1] == [1]  # a short gap: coasted through, as before
+
+    # A car stopping at the picture's side, its track's box run past it (dropped while seen)
+    # and found there again at once: the same car.
+    follow = tracker()
+    for frame in range(16):
+        x = 1000.0 + 30 * min(frame, 6)
+        box = np.array([[x, 400, min(x + 100, 1280), 460]])
+        shown = follow.update(Detections.from_boxes(box, np.ones(1)), picture)
+        assert shown.ids.tolist() in ([], [1]), frame
+        if frame == 7:
+            assert not follow.tracks  # dropped as it reached past the side
+    assert shown.ids.tolist() == [1]
+
+    # A car leaves at the picture's side; one coming in there later is another.
+    follow = tracker()
+    for frame in range(40):
+        x = 300.0 - 20 * frame if frame < 30 else 0.0
+        box = np.clip(np.array([[x, 400, x + 90, 460]]), 0, None)
+        box = box[(box[:, 2] - box[:, 0]) > 10]
+        shown = follow.update(Detections.from_boxes(box, np.ones(len(box))), picture)
+        if frame == 10:
+            assert shown.ids.tolist() == [1]
+    assert shown.ids.tolist() == [2]
+
+
+def test_a_track_coasting_beside_its_found_again_car_gives_it_its_id() -> None:
+    """The same car found again while its old track still coasts (its predicted box spread
+    apart from it): the new track takes the id and the old one goes, so no id is shown twice."""
+    tracker = Tracker(plain_tracking(confirm_frames=3, max_missed=12, show_missed=12))
+    for _ in range(10):
+        tracker.update(Detections.from_boxes(np.array([[500.0, 400, 600, 460]]), np.ones(1)))
+    tracker.tracks[0].velocity = np.array([-30.0, 0, 30, 0])  # the coasting box spreads
+    for _ in range(6):
+        tracker.update(Detections())
+    for _ in range(3):
+        shown = tracker.update(
+            Detections.from_boxes(np.array([[505.0, 405, 595, 455]]), np.ones(1))
+        )
+    assert shown.ids.tolist() == [1] and len(tracker.tracks) == 1
+
+
 def test_track_moves_a_lagging_measurement_to_where_the_car_is_now() -> None:
     # Heat averaged over two frames boxes a car crossing at 20 px per frame 10 px behind it.
     def last_x1(lag: float) -> float:

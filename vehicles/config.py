@@ -81,6 +81,15 @@ class TrackConfig:
     confirm_frames: int = 4  # a track is shown once seen in this many frames
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames
+    # A shown vehicle unseen longer than `max_missed` (not gone from the picture) keeps its id
+    # for a vehicle found within this many frames of its last sighting where it could be: along
+    # its last motion up to `rejoin_reach` times as far, a box there and the found one
+    # overlapping by `rejoin_overlap` of the smaller one, their areas within `rejoin_area`
+    # times each other (see `Tracker`).
+    forget_missed: int = 25
+    rejoin_reach: float = 2.0
+    rejoin_overlap: float = 0.5
+    rejoin_area: float = 4.0
     # A box's side leaving the picture's edge is a vehicle coming in if its motion brought it
     # that far within this many frames (more: heat falling short of a vehicle still cut).
     entering_frames: int = 6
@@ -265,6 +274,7 @@ class DetectorConfig:
             confirm_frames=frames(self.track.confirm_frames),
             max_missed=frames(self.track.max_missed),
             show_missed=frames(self.track.show_missed),
+            forget_missed=frames(self.track.forget_missed),
             entering_frames=frames(self.track.entering_frames),
         )
         return replace(

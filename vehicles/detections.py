@@ -60,7 +60,8 @@ def _intersection(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.
     return np.asarray(ix * iy)
 
 
-def _area(boxes: NDArray[np.float64]) -> NDArray[np.float64]:
+def box_areas(boxes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The area of each [x1, y1, x2, y2] box."""
     return np.asarray((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]))
 
 
@@ -69,8 +70,17 @@ def iou_matrix(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.flo
     if len(a) == 0 or len(b) == 0:
         return np.zeros((len(a), len(b)))
     inter = _intersection(a, b)
-    union = _area(a)[:, None] + _area(b)[None, :] - inter
+    union = box_areas(a)[:, None] + box_areas(b)[None, :] - inter
     return np.asarray(inter / np.maximum(union, 1e-9))
+
+
+def overlap_of_smaller(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Pairwise intersection of two sets of boxes over the smaller box's area: 1 where one lies
+    wholly inside the other, whatever their sizes."""
+    if len(a) == 0 or len(b) == 0:
+        return np.zeros((len(a), len(b)))
+    smaller = np.minimum(box_areas(a)[:, None], box_areas(b)[None, :])
+    return np.asarray(_intersection(a, b) / np.maximum(smaller, 1e-9))
 
 
 def inside_share(
@@ -78,7 +88,7 @@ def inside_share(
 ) -> NDArray[np.float64]:
     """Share of each box's area that lies inside `region` (x0, y0, x1, y1)."""
     frame = np.array([region], np.float64)
-    return np.asarray(_intersection(boxes, frame)[:, 0] / np.maximum(_area(boxes), 1e-9))
+    return np.asarray(_intersection(boxes, frame)[:, 0] / np.maximum(box_areas(boxes), 1e-9))
 
 
 def cut_edges(
@@ -109,7 +119,7 @@ def covered_share(
     if not hidden or len(boxes) == 0:
         return np.zeros(len(boxes))
     inside = _intersection(boxes, np.asarray(hidden, np.float64)).sum(axis=1)
-    return np.asarray(np.minimum(inside / np.maximum(_area(boxes), 1e-9), 1.0))
+    return np.asarray(np.minimum(inside / np.maximum(box_areas(boxes), 1e-9), 1.0))
 
 
 def smaller_sides(boxes: NDArray[np.float64]) -> NDArray[np.float64]:

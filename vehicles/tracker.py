@@ -2,7 +2,9 @@
 
 Each track follows its box with an alpha-beta filter (constant velocity per box edge): matching
 uses the box predicted for this frame, so a car crossing the image quickly keeps its id and its
-shown box does not trail behind it.
+shown box does not trail behind it. A shown vehicle lost for longer than a track coasts (glare,
+another car in front, the classifier unsure for a while) keeps its id when it is found again
+where it would have driven.
 """
 
 from __future__ import annotations
@@ -14,7 +16,14 @@ from numpy.typing import NDArray
 
 from vehicles.assignment import linear_sum_assignment
 from vehicles.config import TrackConfig
-from vehicles.detections import Detections, cut_edges, inside_share, iou_matrix
+from vehicles.detections import (
+    Detections,
+    box_areas,
+    cut_edges,
+    inside_share,
+    iou_matrix,
+    overlap_of_smaller,
+)
 
 
 @dataclass
@@ -30,10 +39,23 @@ class Track:
     missed: int = 0
     id: int = 0
     cut: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(4, bool))
+    # The box and edge velocity when it was last measured (`missed` frames ago).
+    seen: NDArray[np.float64] = field(default_factory=lambda: np.zeros(4))
+    seen_velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(4))
+    forget: int = 0  # once lost (see `Tracker._rejoin`): kept until unseen this many frames
 
     def predicted(self) -> NDArray[np.float64]:
         """The box expected in the next frame."""
         return self.box + self.velocity
+
+    def expected(self, reach: float = 1.0) -> NDArray[np.float64]:
+        """Where the vehicle would be now, `missed` frames after it was last measured: the box
+        then, moved on by `reach` times its centre's velocity. Its size stays as measured: over
+        many frames the edges' own velocities, which heat gathering or thinning moves too,
+        spread a coasting box wider than the vehicle (LA's SUV, 114 px against 88 after 10
+        frames)."""
+        centre = (self.seen_velocity[:2] + self.seen_velocity[2:]) / 2
+        return self.seen + np.tile(centre, 2) * self.missed * reach
 
 
 class Tracker:
@@ -43,11 +65,14 @@ class Tracker:
         self.config = config
         self.lag = lag
         self.tracks: list[Track] = []
+        # Shown tracks dropped unseen in the picture, kept for their ids (see `_rejoin`).
+        self.lost: list[Track] = []
         self._next_id = 1
 
     def reset(self) -> None:
         """Forget every track (ids start again at 1)."""
         self.tracks = []
+        self.lost = []
         self._next_id = 1
 
     def measured_velocities(self, ids: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -104,29 +129,80 @@ class Tracker:
                 track.score = a * float(detections.scores[c]) + (1 - a) * track.score
                 track.hits += 1
                 track.missed = 0
+                track.seen, track.seen_velocity = track.box.copy(), track.velocity.copy()
             else:
                 track.box = predicted[r]  # coast on
                 track.velocity = onward
                 track.missed += 1
-        keep = [t.missed <= cfg.max_missed for t in self.tracks]
+        for lost in self.lost:
+            lost.missed += 1
+        self.lost = [t for t in self.lost if t.missed <= t.forget]
+        inside = staying = [True] * len(self.tracks)
         if region is not None and self.tracks:
             share = inside_share(np.array([t.box for t in self.tracks]), region)
-            keep = [k and s >= cfg.min_inside for k, s in zip(keep, share, strict=True)]
-        self.tracks = [t for t, k in zip(self.tracks, keep, strict=True) if k]
+            inside = [s >= cfg.min_inside for s in share]
+            share = inside_share(np.array([t.expected() for t in self.tracks]), region)
+            staying = [s >= cfg.min_inside for s in share]
+        kept = []
+        for track, within, stays in zip(self.tracks, inside, staying, strict=True):
+            if within and track.missed <= cfg.max_missed:
+                kept.append(track)
+            elif track.id and stays:
+                # Unseen, or its box past the picture's edge, but where it would be by its
+                # last motion is in the picture: kept for its id.
+                track.forget = cfg.forget_missed
+                self.lost.append(track)
+            elif track.id and track.missed <= cfg.show_missed:
+                # Still shown, its box run past the picture's edge by the motion of edges the
+                # picture cut (an SUV beside us, its box jittering at the side): kept as long
+                # as a track coasts, in which a vehicle gone is not replaced by another there.
+                track.forget = cfg.max_missed
+                self.lost.append(track)
+        self.tracks = kept
         for c in sorted(set(range(len(boxes))) - set(matched.values())):
-            self.tracks.append(Track(boxes[c].copy(), float(detections.scores[c]), cut=cut[c]))
-        shown = [
+            box = boxes[c].copy()
+            self.tracks.append(
+                Track(box, float(detections.scores[c]), cut=cut[c], seen=box.copy())
+            )
+        showing = [
             t for t in self.tracks if t.hits >= cfg.confirm_frames and t.missed <= cfg.show_missed
         ]
-        for track in shown:
+        for track in showing:
             if track.id == 0:
-                track.id = self._next_id
-                self._next_id += 1
+                track.id = self._rejoin(track)
+        shown = [t for t in showing if any(t is kept for kept in self.tracks)]
         return Detections.from_boxes(
             np.array([t.box for t in shown]).reshape(-1, 4),
             np.array([t.score for t in shown]),
             np.array([t.id for t in shown], dtype=np.int64),
         )
+
+
+    def _rejoin(self, track: Track) -> int:
+        """The id for `track`, shown for the first time: that of a vehicle lost or coasting
+        unseen (`forget_missed` frames at most) that could now be where `track` is, the one
+        overlapping most; else a new one. It could be anywhere along its last motion, from
+        where it was last seen (a partial box's jump can read as motion) to `rejoin_reach`
+        times as far as that motion takes it (a car we pass speeds up across the picture as it
+        nears): a box there and `track`'s overlap by `rejoin_overlap` of the smaller one (a box
+        on a part of a car is that car), their areas within `rejoin_area` times each other."""
+        cfg = self.config
+        unseen = [t for t in self.tracks if t.id and t.missed] + self.lost
+        if unseen:
+            reach = np.linspace(0.0, cfg.rejoin_reach, 9)
+            along = np.array([[t.expected(k) for k in reach] for t in unseen]).reshape(-1, 4)
+            overlap = overlap_of_smaller(along, track.box[None]).reshape(len(unseen), -1)
+            area = box_areas(np.array([t.seen for t in unseen])) / box_areas(track.box[None])
+            sized = (area <= cfg.rejoin_area) & (area >= 1 / cfg.rejoin_area)
+            overlap = overlap.max(axis=1) * sized
+            best = int(np.argmax(overlap))
+            if overlap[best] >= cfg.rejoin_overlap:
+                found = unseen[best]
+                self.tracks = [t for t in self.tracks if t is not found]
+                self.lost = [t for t in self.lost if t is not found]
+                return found.id
+        self._next_id += 1
+        return self._next_id - 1
 
 
 _OPPOSITE = np.array([2, 3, 0, 1])  # x1 <-> x2, y1 <-> y2
