@@ -231,6 +231,18 @@ def _stat(values: NDArray[np.float64], what: str, unit: str, digits: int = 0) ->
     )
 
 
+def _vehicles_fact(rows: Sequence[Mapping[str, Any]]) -> str:
+    """How many vehicles were tracked (their ids: a vehicle keeps one while in view, and when
+    found again where it could be) and the most in view at once."""
+    found = [r.get("vehicles") or [] for r in rows]
+    ids = {int(v["id"]) for vehicles in found for v in vehicles if int(v.get("id", -1)) > 0}
+    most = max((len(vehicles) for vehicles in found), default=0)
+    return (
+        f"<li>{len(ids)} vehicle{'' if len(ids) == 1 else 's'} tracked, "
+        f"up to {most} in view at once</li>"
+    )
+
+
 STYLE = """
 body { font: 15px/1.4 system-ui, sans-serif; margin: 24px auto; max-width: 900px; color: #222; }
 h1 { font-size: 22px; } h2 { font-size: 18px; margin-top: 28px; }
@@ -281,6 +293,8 @@ def report_html(
     if "offset" in by_key:
         lane = np.isfinite(by_key["offset"].values)
         facts.append(f"<li>Lane found in {100 * lane.mean():.0f} % of frames</li>")
+    if "vehicles" in by_key:
+        facts.append(_vehicles_fact(rows))
     if "distance" in by_key:
         facts.append(_stat(by_key["distance"].values, f"Vehicle {_where(rows)}", "m", 1))
     facts.append(f"<li>{len(events)} events ({html.escape(events_source)})</li>")

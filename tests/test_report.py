@@ -82,6 +82,10 @@ def test_plots_follow_the_record_with_gaps_where_nothing_was_measured() -> None:
     page = report_html("t", _rows(), [event], {}, "test")
     assert page.count('class="span"') == 5  # the event shaded on every plot
     assert "close following" in page and "no video given" in page
+    assert "1 vehicle tracked, up to 1 in view at once" in page
+    two = _rows()
+    two[12]["vehicles"] = [*two[12]["vehicles"], {"id": 4, "box": [500, 200, 540, 230]}]
+    assert "2 vehicles tracked, up to 2 in view at once" in report_html("t", two, [], {}, "t")
     # A rear camera's record: the vehicle in our lane is behind us.
     rear = [{**r, "facing": "rear"} for r in _rows()]
     page = report_html("t", rear, [], {}, "test")
