@@ -91,6 +91,10 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
     ranked = ranked.sort_by([("vehicles_mean", "descending")]).to_pylist()
     assert {r["video"] for r in ranked} == {f["video"] for f in frames}
     assert 0.0 <= 1 - pc.mean(table["lane_found"].cast("int8")).as_py() <= 1.0
+    tracked = ds.dataset(out / "table" / "vehicles").to_table()
+    tracked = tracked.group_by("video").aggregate([("id", "count_distinct")]).to_pylist()
+    by_video = {r["video"]: r["id_count_distinct"] for r in tracked}
+    assert by_video["sub/project_cut_2.mp4"] == len({v["id"] for r in lines for v in r["vehicles"]})
     # The facts are in the tables as in the record; the events table exists (no event here).
     speeds = [f["speed_kmh"] for f in frames if f["video"] == "sub/project_cut_2.mp4"]
     assert speeds == [r["speed_kmh"] for r in lines]
