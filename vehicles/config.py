@@ -81,8 +81,9 @@ class TrackConfig:
     confirm_frames: int = 4  # a track is shown once seen in this many frames
     max_missed: int = 8  # a track is dropped after this many frames unseen
     show_missed: int = 4  # a confirmed track stays shown through this many missed frames
-    # A shown vehicle unseen longer than `max_missed` (not gone from the picture) keeps its id
-    # for a vehicle found within this many frames of its last sighting where it could be: along
+    # A shown vehicle unseen longer than `max_missed` (not gone from the picture; or still shown
+    # and its box run past the picture's side: for `max_missed` frames) keeps its id for a
+    # vehicle found within this many frames of its last sighting where it could be: along
     # its last motion up to `rejoin_reach` times as far, a box there and the found one
     # overlapping by `rejoin_overlap` of the smaller one, their areas within `rejoin_area`
     # times each other (see `Tracker`).

@@ -98,7 +98,8 @@ class Tracker:
         flat road does (`road_velocity`). An edge that was cut by `region`'s edge (`cut_edges`) and
         is seen now, as a vehicle comes into the picture (`entering_sides`), is placed where it
         is seen, at the opposite edge's velocity: its jump out of the picture's edge is where the
-        vehicle's side is, not its motion.
+        vehicle's side is, not its motion. A track shown for the first time takes the id of a
+        vehicle lost a moment ago that could be where it is (`_rejoin`).
         """
         cfg = self.config
         boxes = detections.boxes
@@ -153,17 +154,15 @@ class Tracker:
                 track.forget = cfg.forget_missed
                 self.lost.append(track)
             elif track.id and track.missed <= cfg.show_missed:
-                # Still shown, its box run past the picture's edge by the motion of edges the
-                # picture cut (an SUV beside us, its box jittering at the side): kept as long
-                # as a track coasts, in which a vehicle gone is not replaced by another there.
+                # Still shown, its box run past the picture's side by a velocity read off boxes
+                # the side cuts, which jitter (an SUV beside us): kept as long as a track
+                # coasts, in which a vehicle gone is not replaced there by another.
                 track.forget = cfg.max_missed
                 self.lost.append(track)
         self.tracks = kept
         for c in sorted(set(range(len(boxes))) - set(matched.values())):
             box = boxes[c].copy()
-            self.tracks.append(
-                Track(box, float(detections.scores[c]), cut=cut[c], seen=box.copy())
-            )
+            self.tracks.append(Track(box, float(detections.scores[c]), cut=cut[c], seen=box.copy()))
         showing = [
             t for t in self.tracks if t.hits >= cfg.confirm_frames and t.missed <= cfg.show_missed
         ]
@@ -176,7 +175,6 @@ class Tracker:
             np.array([t.score for t in shown]),
             np.array([t.id for t in shown], dtype=np.int64),
         )
-
 
     def _rejoin(self, track: Track) -> int:
         """The id for `track`, shown for the first time: that of a vehicle lost or coasting
