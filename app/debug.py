@@ -15,6 +15,7 @@ from app.annotators import (
     BoxAnnotator,
     compose,
     default_annotators,
+    draw_boxes,
     heat_picture,
     lane_inset,
     offset_words,
@@ -178,7 +179,9 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
         pictures["heat_frame"] = heat_picture(d.frame_heat, d.heat_threshold)
         pictures["heat_history"] = heat_picture(d.history_heat, d.heat_threshold)
         pictures["regions"] = _boxes(out.undistorted, d.regions, (255, 255, 0))
-        pictures["tracks"] = _boxes(out.undistorted, vehicles.detections, (255, 60, 60))
+        tracks = _boxes(out.undistorted, vehicles.detections, (255, 60, 60))
+        draw_boxes(tracks, d.remembered, (150, 150, 150))  # unseen, their ids kept: grey
+        pictures["tracks"] = tracks
     pictures["composite"] = composite
     return pictures
 

@@ -42,8 +42,9 @@ def mirrored_detections(detections: Detections, width: int) -> Detections:
 
 
 def mirrored_debug(debug: VehicleDebug, width: int) -> VehicleDebug:
-    """Every intermediate mirrored back: window boxes, regions, vetoed windows, and the heat maps
-    (kept over the live picture, which mirrors onto the live picture)."""
+    """Every intermediate mirrored back: window boxes, regions, vetoed windows, remembered
+    vehicles, and the heat maps (kept over the live picture, which mirrors onto the live
+    picture)."""
     return VehicleDebug(
         tuple(replace(hit, boxes=mirrored_boxes(hit.boxes, width)) for hit in debug.hits),
         np.ascontiguousarray(debug.frame_heat[:, ::-1]),
@@ -51,6 +52,7 @@ def mirrored_debug(debug: VehicleDebug, width: int) -> VehicleDebug:
         mirrored_detections(debug.regions, width),
         debug.heat_threshold,
         mirrored_boxes(debug.vetoed, width),
+        remembered=mirrored_detections(debug.remembered, width),
     )
 
 

@@ -10,12 +10,13 @@ import json
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 from numpy.typing import NDArray
 
 from app.evaluate import evaluate, load_labels, load_labels_document
-from tests.helpers import process_clip
+from tests.helpers import process_clip, run_cli
 from vehicles.detections import inside_share, iou_matrix, overlap_of_smaller
 from vehicles.model import default_model_path
 
@@ -138,3 +139,27 @@ def test_la_freeway_the_suv_we_pass_keeps_its_id_through_the_glare(
         assert len(set(ids.tolist())) == len(ids)
         twice = overlap_of_smaller(found, found) >= 0.5
         assert not (twice & ~np.eye(len(found), dtype=bool)).any(), row["frame"]
+
+
+@pytest.mark.slow
+def test_la_freeway_the_debug_mode_draws_the_suv_remembered_through_the_glare(
+    wild_dir: Path, tmp_path: Path
+) -> None:
+    """While no box is on the SUV (frame 158, in the glare), the debug mode's tracks picture
+    draws it in grey where it would be, under the id it keeps: the only thing drawn there."""
+    clip = wild_dir / "la_freeway_minidashcam_2.mp4"
+    out = tmp_path / "dbg"
+    result = run_cli(
+        "debug", clip, "--frames", "158", "--out", out, "--calibration", "none", "--from-start"
+    )
+    assert result.returncode == 0, result.stderr
+    frame = out / "frame_000158"
+    tracks = np.asarray(cv2.imread(str(frame / "09_tracks.png")), int)
+    plain = np.asarray(cv2.imread(str(frame / "01_undistorted.png")), int)
+    drawn = (np.abs(tracks - plain).sum(axis=2) > 0) & (tracks == 150).all(axis=2)
+    ys, xs = np.nonzero(drawn)
+    assert len(xs), "nothing drawn"
+    box = np.array([[xs.min(), ys.min(), xs.max(), ys.max()]], np.float64)
+    labels = load_labels(LABELS / f"{clip.stem}.json")
+    suv = np.array([next(v.box for v in labels[158].vehicles if v.id == 2)], np.float64)
+    assert overlap_of_smaller(box, suv)[0, 0] >= 0.5, (box, suv)

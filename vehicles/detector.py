@@ -34,6 +34,8 @@ class VehicleDebug:
     seen: NDArray[np.uint8] | None = None
     averaged: int = 1
     smoothed: bool = False
+    # Vehicles unseen whose ids are kept, where they would be (`Tracker.remembered`).
+    remembered: Detections = field(default_factory=Detections)
 
 
 @dataclass(frozen=True, eq=False)
@@ -495,6 +497,7 @@ class VehicleDetector:
                 None if seen is frame else seen,
                 averaged,
                 smoothed,
+                self.tracker.remembered().clipped(picture),
             )
             if self.keep_debug
             else None

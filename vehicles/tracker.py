@@ -176,6 +176,15 @@ class Tracker:
             np.array([t.id for t in shown], dtype=np.int64),
         )
 
+    def remembered(self) -> Detections:
+        """The vehicles lost and kept for their ids, at the boxes where they would be now (each
+        last measured box moved on by its centre's motion; see `_rejoin`)."""
+        return Detections.from_boxes(
+            np.array([t.expected() for t in self.lost]).reshape(-1, 4),
+            np.array([t.score for t in self.lost]),
+            np.array([t.id for t in self.lost], dtype=np.int64),
+        )
+
     def _rejoin(self, track: Track) -> int:
         """The id for `track`, shown for the first time: that of a vehicle lost or coasting
         unseen (`forget_missed` frames at most) that could now be where `track` is, the one
