@@ -138,43 +138,50 @@ class Tracker:
         for lost in self.lost:
             lost.missed += 1
         self.lost = [t for t in self.lost if t.missed <= t.forget]
-        inside = staying = [True] * len(self.tracks)
+        inside = [True] * len(self.tracks)
         if region is not None and self.tracks:
             share = inside_share(np.array([t.box for t in self.tracks]), region)
             inside = [s >= cfg.min_inside for s in share]
-            share = inside_share(np.array([t.expected() for t in self.tracks]), region)
-            staying = [s >= cfg.min_inside for s in share]
         kept = []
-        for track, within, stays in zip(self.tracks, inside, staying, strict=True):
+        for track, within in zip(self.tracks, inside, strict=True):
             if within and track.missed <= cfg.max_missed:
                 kept.append(track)
-            elif track.id and stays:
-                # Unseen, or its box past the picture's edge, but where it would be by its
-                # last motion is in the picture: kept for its id.
-                track.forget = cfg.forget_missed
-                self.lost.append(track)
-            elif track.id and track.missed <= cfg.show_missed:
-                # Still shown, its box run past the picture's side by a velocity read off boxes
-                # the side cuts, which jitter (an SUV beside us): kept as long as a track
-                # coasts, in which a vehicle gone is not replaced there by another.
-                track.forget = cfg.max_missed
-                self.lost.append(track)
+            elif track.id:
+                self._remember(track, region)
         self.tracks = kept
         for c in sorted(set(range(len(boxes))) - set(matched.values())):
             box = boxes[c].copy()
             self.tracks.append(Track(box, float(detections.scores[c]), cut=cut[c], seen=box.copy()))
-        showing = [
-            t for t in self.tracks if t.hits >= cfg.confirm_frames and t.missed <= cfg.show_missed
-        ]
-        for track in showing:
-            if track.id == 0:
+        for track in list(self.tracks):  # `_rejoin` may drop a coasting twin from the list
+            if track.id == 0 and self._showing(track):
                 track.id = self._rejoin(track)
-        shown = [t for t in showing if any(t is kept for kept in self.tracks)]
+        shown = [t for t in self.tracks if self._showing(t)]
         return Detections.from_boxes(
             np.array([t.box for t in shown]).reshape(-1, 4),
             np.array([t.score for t in shown]),
             np.array([t.id for t in shown], dtype=np.int64),
         )
+
+    def _showing(self, track: Track) -> bool:
+        """Whether `track` is shown: confirmed, and not unseen for long."""
+        cfg = self.config
+        return track.hits >= cfg.confirm_frames and track.missed <= cfg.show_missed
+
+    def _remember(self, track: Track, region: tuple[float, float, float, float] | None) -> None:
+        """Keep a shown track being dropped for its id (see `_rejoin`): unseen, or its box past
+        the picture's edge, but where it would be by its last motion is in the picture, for
+        `forget_missed` frames; still shown, its box run past the picture's side by a velocity
+        read off boxes the side cuts, which jitter (an SUV beside us), as long as a track
+        coasts, in which a vehicle gone is not replaced there by another. Else forgotten."""
+        cfg = self.config
+        expected = track.expected()[None]
+        if region is None or inside_share(expected, region)[0] >= cfg.min_inside:
+            track.forget = cfg.forget_missed
+        elif track.missed <= cfg.show_missed:
+            track.forget = cfg.max_missed
+        else:
+            return
+        self.lost.append(track)
 
     def remembered(self) -> Detections:
         """The vehicles lost and kept for their ids, at the boxes where they would be now (each
