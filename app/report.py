@@ -231,12 +231,12 @@ def _stat(values: NDArray[np.float64], what: str, unit: str, digits: int = 0) ->
     )
 
 
-def _vehicles_fact(rows: Sequence[Mapping[str, Any]]) -> str:
+def _vehicles_fact(rows: Sequence[Mapping[str, Any]], in_view: NDArray[np.float64]) -> str:
     """How many vehicles were tracked (their ids: a vehicle keeps one while in view, and when
-    found again where it could be) and the most in view at once."""
-    found = [r.get("vehicles") or [] for r in rows]
-    ids = {int(v["id"]) for vehicles in found for v in vehicles if int(v.get("id", -1)) > 0}
-    most = max((len(vehicles) for vehicles in found), default=0)
+    found again where it could be) and the most in view at once (`in_view`, the plotted
+    count of each frame)."""
+    ids = {int(v["id"]) for r in rows for v in r.get("vehicles") or [] if int(v.get("id", -1)) > 0}
+    most = int(np.max(in_view, initial=0))
     return (
         f"<li>{len(ids)} vehicle{'' if len(ids) == 1 else 's'} tracked, "
         f"up to {most} in view at once</li>"
@@ -294,7 +294,7 @@ def report_html(
         lane = np.isfinite(by_key["offset"].values)
         facts.append(f"<li>Lane found in {100 * lane.mean():.0f} % of frames</li>")
     if "vehicles" in by_key:
-        facts.append(_vehicles_fact(rows))
+        facts.append(_vehicles_fact(rows, by_key["vehicles"].values))
     if "distance" in by_key:
         facts.append(_stat(by_key["distance"].values, f"Vehicle {_where(rows)}", "m", 1))
     facts.append(f"<li>{len(events)} events ({html.escape(events_source)})</li>")
