@@ -35,7 +35,7 @@ from lanes.search import (
     prior_search,
     window_search,
 )
-from lanes.threshold import lane_mask
+from lanes.threshold import crossing_length, lab_picture, lane_mask
 
 Boxes = tuple[tuple[int, int, int, int], ...]  # x0, y0, x1, y1 in the frame
 MIDDLE_SHARES = np.linspace(0.3, 0.7, 17)  # where between two lines a middle line is looked for
@@ -190,18 +190,45 @@ class LaneFinder:
             vanishing_x,
             ground_scale,
         )
-        bw, bh = view.size
+        bw = view.size[0]
         birdseye = view.warp(frame)
         advance = self.motion.update(
             birdseye, view.ym_per_px, self._still(view, vehicles, overlays)
         )
-        mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px)
+        lab = lab_picture(birdseye)
+        mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px, lab)
         paint = Paint.of(mask)
         hints = (cfg.dst_left_x * bw, cfg.dst_right_x * bw)
         pixels = [
             self._find(paint, line, hint, view)
             for line, hint in zip((self.left, self.right), hints, strict=True)
         ]
+        lane, sample, believed, status = self._lane_of(pixels, paint, view, width_known, road_x)
+        crossing_m = crossing_length(lab[:, :, 0], cfg, view.xm_per_px, view.ym_per_px)
+        if crossing_m >= cfg.crossing_min_m:
+            # The lines' fits may bend along the bars' ends: no lane is drawn, and the lanes'
+            # width is not sampled. Their history goes on (dropped, the lines were then found
+            # afresh on the kerbs of India's junction beyond its crossing).
+            crossing = f"a pedestrian crossing ahead (its bars over {crossing_m:.1f} m of road)"
+            lane, sample, believed = None, None, False
+            status = (*status, f"no lane: {crossing}")
+        debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
+        spacings = self._dash_spacings(paint.mask, lane, view, advance)
+        return LaneResult(lane, debug, status, advance, sample, believed, spacings)
+
+    def _lane_of(
+        self,
+        pixels: list[LinePixels],
+        paint: Paint,
+        view: BirdsEye,
+        width_known: bool,
+        road_x: float | None,
+    ) -> tuple[LaneEstimate | None, float | None, bool, tuple[str, ...]]:
+        """Fit the lines to this frame's `pixels`, check them and update the history; the lane
+        the history gives (or None), the width sample, whether it is believed, and the notes
+        of what failed (see `process`)."""
+        cfg = self.config
+        bh = view.size[1]
         enough = [len(p) >= view.pixels_for(cfg.min_line_paint_m2) for p in pixels]
         fits: list[Fit | None]
         bend = self._max_bend(view)
@@ -229,9 +256,7 @@ class LaneFinder:
         )
         if doubt is not None:
             status = (*status, f"no lane: {doubt}")
-        debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
-        spacings = self._dash_spacings(paint.mask, lane, view, advance)
-        return LaneResult(lane, debug, status, advance, sample, believed, spacings)
+        return lane, sample, believed, status
 
     def _dash_spacings(
         self,

@@ -34,11 +34,24 @@ def least_white(lightness: NDArray[np.uint8], config: LaneConfig) -> float:
     return max(config.white_min_l_dark, relative)
 
 
+def lab_picture(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """An RGB picture in OpenCV's 8-bit CIELAB (lightness, green-red, blue-yellow), which the
+    paint readings take."""
+    return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2LAB))
+
+
 def lane_mask(
-    birdseye_rgb: NDArray[np.uint8], config: LaneConfig, xm_per_px: float, ym_per_px: float
+    birdseye_rgb: NDArray[np.uint8],
+    config: LaneConfig,
+    xm_per_px: float,
+    ym_per_px: float,
+    lab: NDArray[np.uint8] | None = None,
 ) -> NDArray[np.uint8]:
-    """1 where a pixel looks like white or yellow lane paint, else 0; sizes are set in metres."""
-    lab = cv2.cvtColor(birdseye_rgb, cv2.COLOR_RGB2LAB)
+    """1 where a pixel looks like white or yellow lane paint, else 0; sizes are set in metres.
+    `lab`: the picture in OpenCV's 8-bit CIELAB where the caller has it (`crossing_length`
+    reads its lightness too)."""
+    if lab is None:
+        lab = lab_picture(birdseye_rgb)
     lightness, yellowness = lab[:, :, 0], lab[:, :, 2]
     kernel = tophat_kernel(config.line_width_m / xm_per_px)
     white_contrast = cv2.morphologyEx(lightness, cv2.MORPH_TOPHAT, kernel)
@@ -49,3 +62,42 @@ def lane_mask(
     # Paint runs along the road: a vertical opening drops the flat speckles of concrete texture.
     rows = max(1, round(config.min_paint_m / ym_per_px))
     return np.asarray(cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((rows, 1), np.uint8)))
+
+
+def crossing_length(
+    lightness: NDArray[np.uint8], config: LaneConfig, xm_per_px: float, ym_per_px: float
+) -> float:
+    """The length of road in metres over which a bird's-eye picture's `lightness` (CIELAB's,
+    as `lane_mask` reads it) shows a pedestrian crossing: rows where at least `crossing_bars`
+    bars of paint `crossing_bar_m` wide lie side by side, `crossing_gap_m` apart. A lane line
+    is too thin for a bar, a car or a lit patch too wide and alone, an arrow alone. The bars
+    are found by a top-hat wide enough to keep them whole (the lane mask's keeps only their
+    edges), at about 5 cm a pixel across and 25 cm along (bars are 2-4 m long): a tenth of the
+    cost at 720 rows."""
+    across = max(1, int(0.05 / xm_per_px))
+    along = max(1, int(0.15 / ym_per_px))
+    lightness = np.ascontiguousarray(lightness[::along, ::across])
+    xm_per_px, ym_per_px = xm_per_px * across, ym_per_px * along
+    kernel = np.ones((1, max(3, round(2 * config.crossing_bar_m[1] / xm_per_px) | 1)), np.uint8)
+    contrast = cv2.morphologyEx(lightness, cv2.MORPH_TOPHAT, kernel)
+    paint = (contrast > config.crossing_contrast) & (lightness > least_white(lightness, config))
+    rows = max(1, round(config.crossing_bar_m[2] / ym_per_px))
+    paint = cv2.morphologyEx(paint.astype(np.uint8), cv2.MORPH_OPEN, np.ones((rows, 1), np.uint8))
+    # Each row's runs of paint: where a run starts and ends, in reading order (so paired).
+    steps = np.diff(np.pad(paint, ((0, 0), (1, 1))).astype(np.int8), axis=1)
+    row, start = np.nonzero(steps == 1)
+    _, end = np.nonzero(steps == -1)
+    width = (end - start) * xm_per_px
+    bar = (width >= config.crossing_bar_m[0]) & (width <= config.crossing_bar_m[1])
+    row, start, end = row[bar], start[bar], end[bar]
+    if len(row) < config.crossing_bars:
+        return 0.0
+    # Neighbouring bars of a row a gap apart are linked; a crossing's row has a chain of
+    # `crossing_bars - 1` links or more.
+    gap = (start[1:] - end[:-1]) * xm_per_px
+    linked = (row[1:] == row[:-1]) & (gap >= config.crossing_gap_m[0])
+    linked &= gap <= config.crossing_gap_m[1]
+    chain = np.cumsum(~linked)  # one number per chain of links (and per break)
+    links = np.bincount(chain[linked], minlength=int(chain[-1]) + 1)
+    crossing = links >= config.crossing_bars - 1
+    return float(len(np.unique(row[:-1][linked & crossing[chain]])) * ym_per_px)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -20,7 +21,7 @@ from lanes.line import Line
 from lanes.measure import camera_from, implausible_lane, radius_of_curvature
 from lanes.perspective import birdseye_for
 from lanes.search import LinePixels, fit_lane, fit_line, paint_between, paint_inside
-from lanes.threshold import lane_mask
+from lanes.threshold import crossing_length, lane_mask
 from tests.helpers import (
     dashed_road,
     placed_column,
@@ -921,13 +922,64 @@ def test_paint_inside_a_lane_is_measured_between_its_lines() -> None:
     assert paint_inside(mask, left, right, 5.0, hidden) == 0.0
 
 
+def test_a_pedestrian_crossings_bars_are_measured_and_a_lanes_paint_is_not() -> None:
+    """`crossing_length` reads how much of the road a crossing's bars (50 cm wide, 50 cm apart)
+    cover in a bird's-eye picture's lightness, and nothing in lane lines, dashes, an arrow, a
+    car's light rear, three bars alone or bars barely lighter than the road."""
+    xm, ym = 0.02, 0.1  # metres a pixel across and along: 10 m by 20 m
+    config = LaneConfig()
+
+    def picture(paint: list[tuple[float, float, float, float, int]]) -> np.ndarray:
+        road = np.full((200, 500), 90, np.uint8)  # the lightness
+        for x0, x1, z0, z1, grey in paint:  # metres across from the left, along from the top
+            road[round(z0 / ym) : round(z1 / ym), round(x0 / xm) : round(x1 / xm)] = grey
+        return road
+
+    lines = [(3.1, 3.25, 0.0, 20.0, 220), (6.85, 7.0, 0.0, 20.0, 220)]
+    dashes = [(5.0, 5.15, z, z + 3.0, 220) for z in (1.0, 13.0)]
+    arrow = [(4.9, 5.2, 8.0, 13.0, 220)]
+    car = [(4.0, 5.8, 2.0, 5.0, 200)]
+    assert crossing_length(picture(lines + dashes + arrow + car), config, xm, ym) == 0.0
+
+    def bars(count: int, grey: int) -> list[tuple[float, float, float, float, int]]:
+        return [(2.0 + k, 2.5 + k, 12.0, 15.0, grey) for k in range(count)]
+
+    assert crossing_length(picture(lines + bars(7, 220)), config, xm, ym) == pytest.approx(3.0)
+    assert crossing_length(picture(bars(3, 220)), config, xm, ym) == 0.0
+    assert crossing_length(picture(bars(7, 110)), config, xm, ym) == 0.0
+
+
+def test_no_lane_is_drawn_over_a_pedestrian_crossing() -> None:
+    """While a pedestrian crossing's bars (50 cm wide, 50 cm apart, 3 m along the road) are in
+    view, no lane is drawn and the lanes' width is not sampled; once the bars are behind, the
+    lane is drawn where it was."""
+    camera = road_camera()
+    finder = LaneFinder(LaneConfig())
+    for _ in range(3):
+        before = finder.process(seen_road(LANE_LINES, camera)[0], horizon_y=420.0).lane
+    assert before is not None
+    drawn = []
+    for near in (14.0, 10.0, 7.0, 4.0):
+        bars = [(x, x + 0.5, near, near + 3.0) for x in np.arange(-6.0, 6.0, 1.0)]
+        result = finder.process(seen_road(LANE_LINES + bars, camera)[0], horizon_y=420.0)
+        drawn.append(result.lane is not None)
+        assert any("pedestrian crossing" in note for note in result.status), result.status
+        assert result.width_sample is None and not result.width_believed
+    assert not any(drawn)
+    after = finder.process(seen_road(LANE_LINES, camera)[0], horizon_y=420.0).lane
+    assert after is not None
+    assert after.offset_m == pytest.approx(before.offset_m, abs=0.05)
+    assert after.width_m == pytest.approx(before.width_m, abs=0.1)
+
+
 def test_no_lane_is_drawn_across_painted_bars() -> None:
     """A lane with bars painted across it (30 cm wide, 60 cm apart, 3 m along the road: a
     pedestrian crossing as a view whose metres read wider sees it, or kerb stones) is no lane
     of ours while they are in view, and is again once they are behind; an arrow painted in the
-    lane (30 cm by 5 m) leaves it a lane."""
+    lane (30 cm by 5 m) leaves it a lane. The paint inside the lane tells it alone (the rule
+    for a pedestrian crossing's bars, which also reads these, is switched off)."""
     camera = road_camera()
-    finder = LaneFinder(LaneConfig())
+    finder = LaneFinder(LaneConfig(crossing_min_m=math.inf))
     arrow = [(-0.15, 0.15, 12.0, 17.0)]
     for _ in range(3):
         result = finder.process(seen_road(LANE_LINES + arrow, camera)[0], horizon_y=420.0)
