@@ -446,7 +446,9 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # ground scale is learned (0.70 from 10.5 s: a lane of two counts as two 2.6 m lanes),
     # where a lane 3.4-3.5 m wide is drawn in 7 frames at 871-892 and one at 942, bent along
     # the bars' ends (radius 120-160 m at 20-25 km/h): the bars, mostly beyond its left
-    # line in the longer view, paint 2.4-3.6 % of its inside (the rule's 4 %).
+    # line in the longer view, paint 2.4-3.6 % of its inside (the rule's 4 %); in all but
+    # frame 942 (past the bars) since the bars themselves tell a crossing (checked by eye at
+    # 840, 846, 850, 853, 871, 877, 885 and 892: the lanes drawn bent at the bars' ends).
     # Before the scale was learned, 460 frames at 7-29 s drew the two-lane carriageway with
     # the dashed divider inside (4.8-5.3 m); 55 do now, all before 10.9 s, and the lane drawn
     # after is the car's own, its right side at the dashes or made up 0.3-0.4 m past them
@@ -472,7 +474,7 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
         at = np.interp([300, 340], right[::-1, 1], right[::-1, 0])
         assert np.abs(at - truth).max() <= 20, (r["frame"], at, truth)
     zebra = [r for r in rows if 34.6 <= r["time_s"] < 37.7]
-    assert sum(r["lane"] is None for r in zebra) >= 0.88 * len(zebra)
+    assert sum(r["lane"] is None for r in zebra) >= 0.97 * len(zebra)
     two = [r for r in road if r["lane"] is not None and r["lane"]["width_m"] > 4.4]
     assert len(two) <= 0.1 * len(road)
     assert rows[-1]["ground_scale"] == pytest.approx(0.7, abs=0.05)
