@@ -89,14 +89,14 @@ class LaneConfig:
     # while India's pedestrian crossings paint 4.1-15.6 % of the lanes drawn across them.
     inside_margin_m: float = 0.3
     max_inside_paint: float = 0.04
-    # ... nor any lane while a pedestrian crossing is in view: bars `crossing_bar_m` wide (the
-    # first two) and at least its third long, `crossing_contrast` lighter than the road beside
-    # them (a top-hat twice the widest bar wide), at least `crossing_bars` of them side by side
-    # with gaps of `crossing_gap_m`, in rows over `crossing_min_m` of road or more. A lane line
-    # is too thin for a bar, a car or a lit patch too wide and alone; over the bars the lines'
-    # fits bend along their ends. The contrast is a paint's: from 18 grey levels the project
-    # video's light concrete bridge (test1.jpg) read as bars over 1.9 m (README, A pedestrian
-    # crossing).
+    # ... nor any lane while a pedestrian crossing is in view: bars as wide as the first two of
+    # `crossing_bar_m` and at least its third long (metres), `crossing_contrast` lighter than
+    # the road beside them (a top-hat twice the widest bar wide), at least `crossing_bars` of
+    # them side by side with gaps of `crossing_gap_m`, in rows over `crossing_min_m` of road or
+    # more. A lane line is too thin for a bar, a car or a lit patch too wide and alone; over
+    # the bars the lines' fits bend along their ends. The contrast is a paint's: from 18 grey
+    # levels the project video's light concrete bridge (test1.jpg) read as bars over 1.9 m
+    # (README, No lane over a pedestrian crossing).
     crossing_bar_m: tuple[float, float, float] = (0.25, 1.2, 1.0)
     crossing_gap_m: tuple[float, float] = (0.2, 1.5)
     crossing_bars: int = 4

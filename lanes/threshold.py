@@ -72,8 +72,8 @@ def crossing_length(
     bars of paint `crossing_bar_m` wide lie side by side, `crossing_gap_m` apart. A lane line
     is too thin for a bar, a car or a lit patch too wide and alone, an arrow alone. The bars
     are found by a top-hat wide enough to keep them whole (the lane mask's keeps only their
-    edges), at about 5 cm a pixel across and 25 cm along (bars are 2-4 m long): a tenth of the
-    cost at 720 rows."""
+    edges), at about 5 cm a pixel across and 15 cm along (bars are 2-4 m long; half the
+    pixels at 720 rows)."""
     across = max(1, int(0.05 / xm_per_px))
     along = max(1, int(0.15 / ym_per_px))
     lightness = np.ascontiguousarray(lightness[::along, ::across])
