@@ -40,6 +40,7 @@ from vehicles.detector import VehicleResult
 # found after 24 samples of every 5th frame (4-5 s of driving).
 WARMUP_S = HORIZON_WAIT_S + 3.0
 SCALE_COLORS = [(255, 80, 80), (255, 200, 0), (80, 255, 80), (0, 200, 255), (200, 80, 255)]
+CROSSING_COLOR = (255, 140, 0)  # RGB: a pedestrian crossing's bars in the lane mask picture
 
 
 def parse_frames(spec: str) -> tuple[int, int]:
@@ -117,6 +118,22 @@ def scene_picture(
     return picture
 
 
+def lane_mask_picture(
+    mask: NDArray[np.uint8], crossing: NDArray[np.bool_] | None = None
+) -> NDArray[np.uint8]:
+    """The lane mask in white on black; where a pedestrian crossing was read, in colour with
+    its bars in orange and a caption saying why no lane is drawn."""
+    picture = (mask * 255).astype(np.uint8)
+    if crossing is None:
+        return picture
+    coloured = np.repeat(picture[:, :, None], 3, axis=2)
+    coloured[crossing] = CROSSING_COLOR
+    cv2.putText(
+        coloured, "pedestrian crossing", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, CROSSING_COLOR, 1
+    )
+    return coloured
+
+
 def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.uint8]]:
     """Named pictures of every intermediate of one processed frame, in pipeline order."""
     pictures: dict[str, NDArray[np.uint8]] = {"undistorted": out.undistorted}
@@ -128,7 +145,7 @@ def intermediates(out: FrameOutput, composite: Frame) -> dict[str, NDArray[np.ui
         )
     lane = out.result.lane
     if lane is not None and lane.debug is not None:
-        pictures["lane_mask"] = (lane.debug.mask * 255).astype(np.uint8)
+        pictures["lane_mask"] = lane_mask_picture(lane.debug.mask, lane.debug.crossing)
         fit = lane_inset(lane)
         if fit is not None:
             for x1, y1, x2, y2 in lane.debug.left_pixels.windows + lane.debug.right_pixels.windows:

@@ -35,7 +35,7 @@ from lanes.search import (
     prior_search,
     window_search,
 )
-from lanes.threshold import crossing_length, lab_picture, lane_mask
+from lanes.threshold import crossing_bars, crossing_length, lab_picture, lane_mask
 
 Boxes = tuple[tuple[int, int, int, int], ...]  # x0, y0, x1, y1 in the frame
 MIDDLE_SHARES = np.linspace(0.3, 0.7, 17)  # where between two lines a middle line is looked for
@@ -64,6 +64,7 @@ class LaneDebug:
     mask: NDArray[np.uint8]
     left_pixels: LinePixels
     right_pixels: LinePixels
+    crossing: NDArray[np.bool_] | None = None  # a pedestrian crossing's bars, where one was read
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,7 +213,12 @@ class LaneFinder:
             crossing = f"a pedestrian crossing ahead (its bars over {crossing_m:.1f} m of road)"
             lane, sample, believed = None, None, False
             status = (*status, f"no lane: {crossing}")
-        debug = LaneDebug(birdseye, mask, pixels[0], pixels[1]) if self.keep_debug else None
+        debug = None
+        if self.keep_debug:
+            bars = None
+            if crossing_m >= cfg.crossing_min_m:
+                bars = crossing_bars(lab[:, :, 0], cfg, view.xm_per_px, view.ym_per_px)
+            debug = LaneDebug(birdseye, mask, pixels[0], pixels[1], bars)
         spacings = self._dash_spacings(paint.mask, lane, view, advance)
         return LaneResult(lane, debug, status, advance, sample, believed, spacings)
 

@@ -70,12 +70,41 @@ def crossing_length(
     """The length of road in metres over which a bird's-eye picture's `lightness` (CIELAB's,
     as `lane_mask` reads it) shows a pedestrian crossing: rows where at least `crossing_bars`
     bars of paint `crossing_bar_m` wide lie side by side, `crossing_gap_m` apart. A lane line
-    is too thin for a bar, a car or a lit patch too wide and alone, an arrow alone. The bars
-    are found by a top-hat wide enough to keep them whole (the lane mask's keeps only their
-    edges), at about 5 cm a pixel across and 15 cm along (bars are 2-4 m long; half the
-    pixels at 720 rows)."""
-    across = max(1, int(0.05 / xm_per_px))
-    along = max(1, int(0.15 / ym_per_px))
+    is too thin for a bar, a car or a lit patch too wide and alone, an arrow alone."""
+    row, _, _, ym_read = _crossing_runs(lightness, config, xm_per_px, ym_per_px)
+    return float(len(np.unique(row)) * ym_read)
+
+
+def crossing_bars(
+    lightness: NDArray[np.uint8], config: LaneConfig, xm_per_px: float, ym_per_px: float
+) -> NDArray[np.bool_]:
+    """Where `crossing_length` reads a crossing's bars in `lightness` (its pixels, for the
+    debug mode's picture)."""
+    h, w = lightness.shape
+    across, along = _steps(xm_per_px, ym_per_px)
+    row, start, end, _ = _crossing_runs(lightness, config, xm_per_px, ym_per_px)
+    rows, columns = -(-h // along), -(-w // across)
+    edges = np.zeros((rows, columns + 1), np.int32)
+    np.add.at(edges, (row, start), 1)
+    np.add.at(edges, (row, end), -1)
+    read = np.cumsum(edges, axis=1)[:, :columns] > 0
+    return np.repeat(np.repeat(read, along, axis=0), across, axis=1)[:h, :w]
+
+
+def _steps(xm_per_px: float, ym_per_px: float) -> tuple[int, int]:
+    """The columns and rows a crossing's bars are read in steps of: about 5 cm across and 15 cm
+    along (bars are 2-4 m long; half the pixels at 720 rows)."""
+    return max(1, int(0.05 / xm_per_px)), max(1, int(0.15 / ym_per_px))
+
+
+def _crossing_runs(
+    lightness: NDArray[np.uint8], config: LaneConfig, xm_per_px: float, ym_per_px: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], float]:
+    """The bars of the rows that show a crossing (see `crossing_length`): each one's row, first
+    and past-the-last column in the picture read in `_steps`, and that picture's metres a
+    row. The bars are found by a top-hat wide enough to keep them whole (the lane mask's
+    keeps only their edges)."""
+    across, along = _steps(xm_per_px, ym_per_px)
     lightness = np.ascontiguousarray(lightness[::along, ::across])
     xm_per_px, ym_per_px = xm_per_px * across, ym_per_px * along
     kernel = np.ones((1, max(3, round(2 * config.crossing_bar_m[1] / xm_per_px) | 1)), np.uint8)
@@ -90,14 +119,19 @@ def crossing_length(
     width = (end - start) * xm_per_px
     bar = (width >= config.crossing_bar_m[0]) & (width <= config.crossing_bar_m[1])
     row, start, end = row[bar], start[bar], end[bar]
+    none = np.zeros(0, np.intp)
     if len(row) < config.crossing_bars:
-        return 0.0
+        return none, none, none, ym_per_px
     # Neighbouring bars of a row a gap apart are linked; a crossing's row has a chain of
-    # `crossing_bars - 1` links or more.
+    # `crossing_bars - 1` links or more, whose bars are the crossing's.
     gap = (start[1:] - end[:-1]) * xm_per_px
     linked = (row[1:] == row[:-1]) & (gap >= config.crossing_gap_m[0])
     linked &= gap <= config.crossing_gap_m[1]
     chain = np.cumsum(~linked)  # one number per chain of links (and per break)
     links = np.bincount(chain[linked], minlength=int(chain[-1]) + 1)
-    crossing = links >= config.crossing_bars - 1
-    return float(len(np.unique(row[:-1][linked & crossing[chain]])) * ym_per_px)
+    crossing = linked & (links >= config.crossing_bars - 1)[chain]
+    # A link's two bars: the one before it and the one after.
+    kept = np.zeros(len(row), bool)
+    kept[:-1] |= crossing
+    kept[1:] |= crossing
+    return row[kept], start[kept], end[kept], ym_per_px

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -953,13 +954,18 @@ def test_a_pedestrian_crossings_bars_are_measured_and_a_lanes_paint_is_not() -> 
 
 def test_no_lane_is_drawn_over_a_pedestrian_crossing() -> None:
     """While a pedestrian crossing's bars (50 cm wide, 50 cm apart, 3 m along the road) are in
-    view, no lane is drawn and the lanes' width is not sampled; once the bars are behind, the
-    lane is drawn where it was."""
+    view, no lane is drawn and the lanes' width is not sampled, and the debug mode's lane mask
+    picture shows the bars in colour; once the bars are behind, the lane is drawn where it
+    was."""
+    from app.debug import CROSSING_COLOR, lane_mask_picture
+
     camera = road_camera()
-    finder = LaneFinder(LaneConfig())
+    finder = LaneFinder(LaneConfig(), keep_debug=True)
     for _ in range(3):
-        before = finder.process(seen_road(LANE_LINES, camera)[0], horizon_y=420.0).lane
-    assert before is not None
+        result = finder.process(seen_road(LANE_LINES, camera)[0], horizon_y=420.0)
+    before = result.lane
+    assert before is not None and result.debug is not None and result.debug.crossing is None
+    assert lane_mask_picture(result.debug.mask).ndim == 2
     drawn = []
     for near in (14.0, 10.0, 7.0, 4.0):
         bars = [(x, x + 0.5, near, near + 3.0) for x in np.arange(-6.0, 6.0, 1.0)]
@@ -967,6 +973,20 @@ def test_no_lane_is_drawn_over_a_pedestrian_crossing() -> None:
         drawn.append(result.lane is not None)
         assert any("pedestrian crossing" in note for note in result.status), result.status
         assert result.width_sample is None and not result.width_believed
+        assert result.debug is not None and result.debug.crossing is not None
+        crossing = result.debug.crossing
+        assert crossing.shape == result.debug.mask.shape and 0 < crossing.mean() < 0.2
+        # The bars drawn are those of the rows the status counts (to a row of the view).
+        view = finder.current_view
+        assert view is not None
+        said = re.search(r"bars over ([\d.]+) m", " ".join(result.status))
+        assert said is not None
+        drawn_m = np.count_nonzero(crossing.any(axis=1)) * view.ym_per_px
+        assert abs(drawn_m - float(said[1])) <= view.ym_per_px + 0.05
+        picture = lane_mask_picture(result.debug.mask, crossing)
+        assert (picture[crossing] == CROSSING_COLOR).all()
+        rest = picture[20:][~crossing[20:]]  # below the caption: the mask as it was
+        assert (rest == (result.debug.mask[20:][~crossing[20:]] * 255)[:, None]).all()
     assert not any(drawn)
     after = finder.process(seen_road(LANE_LINES, camera)[0], horizon_y=420.0).lane
     assert after is not None
