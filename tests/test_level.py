@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from camera_cal.level import LevelConfig, RollReading, edge_lean
+from camera_cal.level import LaneLattice, LevelConfig, RollReading, edge_lean
 
 
 def _rear(turn_deg: float, seed: int = 0) -> np.ndarray:
@@ -81,3 +81,90 @@ def test_one_vehicles_lean_is_not_the_pictures() -> None:
     for k in range(40):
         contradicted.update(_rear(3.0, k), box, np.array([1]))
     assert all(contradicted.update(_rear(0.0, k), box, np.array([2])) is None for k in range(8))
+
+
+def _road(
+    lines_m: tuple[float, ...],
+    solid: tuple[bool, ...],
+    turn_deg: float = 0.0,
+    size: tuple[int, int] = (1280, 720),
+    vanishing: tuple[float, float] = (640.0, 400.0),
+    height_m: float = 1.2,
+    seed: int = 0,
+) -> tuple[np.ndarray, tuple[float, float]]:
+    """A road seen ahead as a pinhole camera `height_m` over it sees it (a focal length of
+    1000 px): lines along it at `lines_m` aside (0.15 m wide; each solid or dashed as US lanes
+    are, 3.05 m painted in every 12.19 m), the picture turned `turn_deg` anticlockwise about
+    its centre, the car `seed` metres on; the RGB picture and where the road's vanishing point
+    is in it."""
+    w, h = size
+    vx, vy = vanishing
+    rng = np.random.default_rng(seed)
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    below = np.maximum(ys - vy, 1e-6)
+    t = (xs - vx) / below  # metres aside per metre of height, along each row
+    distance = 1000.0 * height_m / below
+    grey = np.where(ys > vy, 90.0, 170.0)
+    for aside, whole in zip(lines_m, solid, strict=True):
+        on = (np.abs(t - aside / height_m) < 0.075 / height_m) & (ys > vy + 2)
+        if not whole:
+            on &= np.mod(distance + seed, 12.19) < 3.05
+        grey[on] = 220.0
+    grey += rng.normal(0, 3, grey.shape)
+    picture = np.repeat(np.clip(grey, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2)
+    turn = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), turn_deg, 1.0)
+    turned = cv2.warpAffine(picture, turn, size, borderMode=cv2.BORDER_REPLICATE)
+    moved = turn @ np.array([vx, vy, 1.0])
+    return turned, (float(moved[0]), float(moved[1]))
+
+
+def _lattice_turn(
+    lines_m: tuple[float, ...], solid: tuple[bool, ...], turn_deg: float, frames: int = 12
+) -> float | None:
+    lattice = LaneLattice()
+    for seed in range(frames):
+        picture, vanishing = _road(lines_m, solid, turn_deg, seed=seed)
+        lattice.update(picture, vanishing, (0, 0, 1280, 720))
+    return lattice.turn_deg
+
+
+# A carriageway of five 3.7 m lanes, the car in the middle one: a solid line at each edge,
+# dashed ones between.
+FIVE_LANES = (-9.25, -5.55, -1.85, 1.85, 5.55, 9.25)
+EDGES = (True, False, False, False, False, True)
+
+
+@pytest.mark.parametrize("turn", [-4.0, -2.0, 0.0, 2.0, 3.0])
+def test_equally_wide_lanes_read_the_pictures_turn(turn: float) -> None:
+    """Lanes of one width side by side, seen by a turned camera, read its turn within 0.4
+    degrees, and a level one about level (which `RollReading` takes as no turn)."""
+    read = _lattice_turn(FIVE_LANES, EDGES, turn)
+    assert read is not None and abs(read - turn) < 0.4, read
+
+
+def test_one_three_of_lines_or_lanes_of_unequal_width_read_no_turn() -> None:
+    """Where only one three of lines is seen beyond the car's lane (a two-lane carriageway),
+    or the lanes beside the car's are wider than it (as a bowing lens or a lane of another
+    width makes them look), no turn is read: a turn spreads every three alike."""
+    two_lanes = (-1.85, 1.85, 5.55)
+    assert _lattice_turn(two_lanes, (True, False, True), -3.0) is None
+    uneven = (-9.25 - 1.2, -5.55 - 0.6, -1.85, 1.85, 5.55 + 0.6, 9.25 + 1.2)
+    assert _lattice_turn(uneven, EDGES, 0.0) is None
+    # Solid lines between the lanes: the edges of another carriageway, not lanes of ours.
+    assert _lattice_turn(FIVE_LANES, (True,) * 6, -3.0) is None
+
+
+def test_the_vehicles_level_rears_outweigh_the_lines() -> None:
+    """The lines' turn is taken where the vehicles say nothing; where their rears read level,
+    it is not (lanes of unequal width read as a turn); read off the lines, `by_lines` says so."""
+    box = np.array([[40.0, 50.0, 200.0, 190.0]])
+    roads = [_road(FIVE_LANES, EDGES, -3.0, seed=seed) for seed in range(12)]
+    none, no_ids = np.zeros((0, 4)), np.zeros(0, int)
+    lines = RollReading()
+    turns = [lines.update(road, none, no_ids, vanishing) for road, vanishing in roads]
+    assert turns[-1] is not None and abs(turns[-1] + 3.0) < 0.4 and lines.by_lines, turns
+    vetoed = RollReading()
+    for seed in range(20):
+        vetoed.update(_rear(0.0, seed), box, np.array([1 + seed % 2]))
+    assert all(vetoed.update(road, none, no_ids, vanishing) is None for road, vanishing in roads)
+    assert vetoed.lattice.turn_deg is not None
