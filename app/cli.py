@@ -73,8 +73,8 @@ RollOption = Annotated[
         metavar="DEG",
         help="The picture's tilt from a camera mounted askew, in degrees: positive when it is "
         "turned anticlockwise (the horizon rises to the right). The frames are levelled, the "
-        "output and the record too (default: read off the vehicles' rear edges, and levelled "
-        "from when they agree; 0: level).",
+        "output and the record too (default: read off the vehicles' rear edges or the lane "
+        "lines' spacing, and levelled from when they agree; 0: level).",
     ),
 ]
 

@@ -103,25 +103,31 @@ def facing_note(stated: bool | None, seen: bool | None) -> str | None:
     )
 
 
-def levelled_note(roll_deg: float, frame: int, fps: float) -> str:
-    """What to tell of a picture levelled by a turn its vehicles' rear edges read (see
-    `camera_cal.level`), from `frame` of a video at `fps` on."""
+# What read a turn: the vehicles' rear edges, or the lane lines' spacing (`camera_cal.level`).
+LEANS_CUE = "the vehicles' rear edges lean so, as a camera mounted askew turns them"
+LINES_CUE = "the lane lines are spaced so, as a camera mounted askew spreads them to one side"
+
+
+def levelled_note(roll_deg: float, frame: int, fps: float, by_lines: bool = False) -> str:
+    """What to tell of a picture levelled by a turn its vehicles' rear edges read, or (`by_lines`)
+    its lane lines' spacing (see `camera_cal.level`), from `frame` of a video at `fps` on."""
     way = "anticlockwise" if roll_deg > 0 else "clockwise"
     return (
-        f"its picture is turned {abs(roll_deg):.1f} degrees {way} (the vehicles' rear edges "
-        f"lean so, as a camera mounted askew turns them): levelled from {frame / fps:.1f} s on "
+        f"its picture is turned {abs(roll_deg):.1f} degrees {way} "
+        f"({LINES_CUE if by_lines else LEANS_CUE}): levelled from {frame / fps:.1f} s on "
         f"(the output and the record with it); pass --roll {roll_deg:g} to level it from the "
         "start, or --roll 0 to leave it as it is"
     )
 
 
 def roll_contradicted_note(stated_deg: float, read_deg: float) -> str:
-    """What to tell where the vehicles' rear edges still lean once levelled by the stated turn:
-    the turn they read instead, and how to state it or have it read."""
+    """What to tell where the picture still reads turned once levelled by the stated turn (its
+    vehicles' rear edges, or its lane lines): the turn it reads instead, and how to state it or
+    have it read."""
     return (
-        f"stated --roll {stated_deg:g}, but its vehicles' rear edges still lean once levelled "
-        f"so: they read a turn of {read_deg:g} degrees; pass --roll {read_deg:g}, or leave "
-        "--roll out to have it read and levelled"
+        f"stated --roll {stated_deg:g}, but its picture still reads turned once levelled so "
+        f"(its vehicles' rear edges or lane lines): a turn of {read_deg:g} degrees; pass --roll "
+        f"{read_deg:g}, or leave --roll out to have it read and levelled"
     )
 
 
@@ -364,7 +370,8 @@ def process_video(
         if facing is not None:
             log(f"note: {source.name} is {facing}")
         if pipeline.levelled is not None:
-            log(f"note: {source.name}: {levelled_note(*pipeline.levelled, info.fps)}")
+            said = levelled_note(*pipeline.levelled, info.fps, pipeline.levelled_by_lines)
+            log(f"note: {source.name}: {said}")
         if pipeline.roll_contradicted is not None:
             said = roll_contradicted_note(mounting.roll_deg or 0.0, pipeline.roll_contradicted)
             log(f"note: {source.name}: {said}")

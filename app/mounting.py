@@ -21,7 +21,8 @@ class Mounting:
     over the road in metres (None: a car's; sizes the vehicle windows), traffic keeping left
     (the vehicle stage sees every frame mirrored and its boxes come back mirrored,
     app/traffic.py), the picture's turn in degrees anticlockwise (levelled with the lens; None:
-    read off the vehicles' rear edges, `camera_cal.level`, and levelled from then on) and
+    read off the vehicles' rear edges or the lane lines' spacing, `camera_cal.level`, and
+    levelled from then on) and
     which way the camera looks (`FACINGS`: "auto" reads it from the road's motion,
     `app.facts.Facing`; "rear" is a rear camera's file as its lens sees the road, its sides
     swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one saved mirrored,

@@ -143,11 +143,12 @@ class Pipeline:
     driving events under way end at the cut.
 
     A picture whose turn the user did not state is read for one from its vehicles' rear edges
-    (`camera_cal.RollReading`); once they agree on a turn, the frames are levelled by it from
-    the next one started (`levelled`). A stated turn stands; where the edges still lean after
-    it, the turn they imply is kept for a note (`roll_contradicted`). The stages and the scene
-    go on with their history, which the turn moves by a few pixels: started over, as at a cut,
-    the turned shared clips lost more frames to it than they gained (README).
+    and its lane lines' spacing (`camera_cal.RollReading`); once they agree on a turn, the
+    frames are levelled by it from the next one started (`levelled`). A stated turn stands;
+    where the picture still reads turned after it, the turn it implies is kept for a note
+    (`roll_contradicted`). The stages and the scene go on with their history, which the turn
+    moves by a few pixels: started over, as at a cut, the turned shared clips lost more frames
+    to it than they gained (README).
 
     An unknown camera's stages wait for its horizon (see `_wait`) unless it is read ahead: off
     the clip's first frames by `look_ahead`, and off a new shot's after a cut through
@@ -200,8 +201,10 @@ class Pipeline:
         self._horizon_found = False  # the footage showed its horizon in some frame
         self._roll = 0.0  # the turn the frames are levelled by
         self._level: RollReading | None = None  # the edges' lean, read until it is known
-        # The turn read off the footage and the frame from which it was levelled, if any.
+        # The turn read off the footage and the frame from which it was levelled, if any, and
+        # whether the lane lines read it (else the vehicles' rear edges).
         self.levelled: tuple[float, int] | None = None
+        self.levelled_by_lines = False
         # The turn the edges imply where the user stated another (None: they agree, or too
         # few edges to tell).
         self.roll_contradicted: float | None = None
@@ -233,6 +236,7 @@ class Pipeline:
         # A still has too few vehicles to read a turn from.
         self._level = RollReading() if fps > 0 else None
         self.levelled, self.roll_contradicted = None, None
+        self.levelled_by_lines = False
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
@@ -542,18 +546,27 @@ class Pipeline:
             placement["ground_scale"],
         )
 
-    def _read_roll(self, undistorted: Frame, detections: Detections, index: int) -> None:
-        """Take in the leans of the tracked vehicles of the frame started as `index`; once they
-        read a turn, level the frames by it from the next one started, or, where the user
+    def _read_roll(
+        self, undistorted: Frame, detections: Detections, index: int, scene: SceneGeometry
+    ) -> None:
+        """Take in the leans of the tracked vehicles of the frame started as `index`, and its
+        lane lines along the rays from the `scene`'s vanishing point once it is measured; once
+        they read a turn, level the frames by it from the next one started, or, where the user
         stated the turn, keep the one they imply for a note (once: the reading then stops)."""
-        if self._level is None or not len(detections):
+        if self._level is None:
             return
         tracked = detections.ids > 0
-        turn = self._level.update(undistorted, detections.boxes[tracked], detections.ids[tracked])
+        vanishing = None
+        if scene.estimated and scene.vanishing_x is not None:
+            vanishing = (scene.vanishing_x, scene.horizon_y)
+        turn = self._level.update(
+            undistorted, detections.boxes[tracked], detections.ids[tracked], vanishing, scene.live
+        )
         if turn is None:
             if self._level.full:  # level, or leaning every which way: read no more
                 self._level = None
             return
+        self.levelled_by_lines = self._level.by_lines
         self._level = None
         if self.mounting.roll_deg is not None:
             self.roll_contradicted = round(self._roll + turn, 1)
@@ -612,7 +625,7 @@ class Pipeline:
         if vehicles is not None:
             vehicles = self._numbered(vehicles)
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
-            self._read_roll(undistorted, vehicles.detections, started.index)
+            self._read_roll(undistorted, vehicles.detections, started.index, started.scene)
         facts = None
         current = started.view
         if (

@@ -54,7 +54,8 @@ class Framing:
     is told so (`--traffic left`); `light`: every pixel value times this (0.4: dusk, the
     asphalt at about 30 grey levels); `roll`: last, the picture turned this many degrees
     anticlockwise about its centre, as by a camera mounted askew; `roll_stated`: the turn
-    roadview is told (`--roll`; None: it reads one off the vehicles' rear edges, as by default,
+    roadview is told (`--roll`; None: it reads one off the vehicles' rear edges or the lane
+    lines, as by default,
     and levels the frames by it from then on): each frame's labels are turned by what is left
     of the turn in roadview's output (none where it was told the copy's); `reverse`: the
     frames played backwards, the road moving away as a rear camera films it (with `mirror`, its
@@ -226,8 +227,8 @@ def dusk_framings(source: tuple[int, int]) -> tuple[Framing, ...]:
 
 
 # A camera mounted askew that roadview is not told of: turned 3 degrees either way, the turn read
-# off the vehicles' rear edges and levelled from then on, and the same told `--roll 0` (as
-# roadview was before it read the turn).
+# off the vehicles' rear edges or the lane lines and levelled from then on, and the same told
+# `--roll 0` (as roadview was before it read the turn).
 UNTOLD_ROLL_FRAMINGS = (
     Framing("turned 3°, read", roll=3.0),
     Framing("turned 3°, --roll 0", roll=3.0, roll_stated=0.0),
