@@ -23,8 +23,20 @@ from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter1d
 
 Box = tuple[int, int, int, int]
-# Where the rays' picture is read in a frame, and which of its pixels lie in the live box.
-RayGrid = tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_]]
+
+
+@dataclass(frozen=True)
+class RayGrid:
+    """Where each pixel of the rays' picture is read in the frame's rows from `top` to `bottom`
+    (`cv2.remap`'s maps, their rows counted from `top`), which of them lie inside the live box,
+    and how many rows each column has there."""
+
+    xs: NDArray[np.float32]
+    ys: NDArray[np.float32]
+    top: int
+    bottom: int
+    inside: NDArray[np.bool_]
+    seen: NDArray[np.intp]
 
 
 @dataclass(frozen=True)
@@ -166,8 +178,7 @@ def edge_lean(
 
 
 def ray_grid(vanishing: tuple[float, float], live: Box, config: LatticeConfig) -> RayGrid:
-    """Where each pixel of the rays' picture is read in the frame (x and y maps for
-    `cv2.remap`), and which of them lie inside the `live` box (x0, y0, x1, y1): a column per
+    """The rays' picture's grid in a frame, inside the `live` box (x0, y0, x1, y1): a column per
     `config.step` of t = (x - vx) / (y - vy) from -`reach` to `reach`, rows as many as 720
     frame rows would give, from under the horizon through the `vanishing` point (vx, vy) down
     to the bonnet's margin (see `LatticeConfig`). Every line on the road along it is a column."""
@@ -182,7 +193,16 @@ def ray_grid(vanishing: tuple[float, float], live: Box, config: LatticeConfig) -
     xs = vx + ts[None, :] * (rows[:, None] - vy)
     ys = np.repeat(rows[:, None], len(ts), axis=1)
     inside = (xs >= x0) & (xs <= x1 - 1)
-    return xs.astype(np.float32), ys.astype(np.float32), inside
+    first = int(np.floor(top)) if count else 0
+    last = int(np.ceil(bottom)) + 2 if count else 0
+    return RayGrid(
+        xs.astype(np.float32),
+        (ys - first).astype(np.float32),
+        first,
+        last,
+        inside,
+        np.count_nonzero(inside, axis=0),
+    )
 
 
 def _dashed(painted: NDArray[np.bool_], config: LatticeConfig) -> bool:
@@ -199,16 +219,16 @@ def lane_lines(
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """The lines on the road of an RGB picture, as their t on the rays' `grid` (`ray_grid`),
     left to right, and whether each is dashed (see `LatticeConfig`)."""
-    xs, ys, inside = grid
-    if xs.shape[0] < config.min_rows:
+    inside, seen = grid.inside, grid.seen
+    if inside.shape[0] < config.min_rows:
         return np.zeros(0), np.zeros(0, bool)
-    # The rays' picture made grey, not the frame: a tenth of the pixels.
-    rays = cv2.cvtColor(cv2.remap(rgb, xs, ys, cv2.INTER_LINEAR), cv2.COLOR_RGB2GRAY)
+    # Only the rows the rays read are made grey.
+    grey = cv2.cvtColor(np.ascontiguousarray(rgb[grid.top : grid.bottom]), cv2.COLOR_RGB2GRAY)
+    rays = cv2.remap(grey, grid.xs, grid.ys, cv2.INTER_LINEAR)
     width = max(3, round(config.paint_width / config.step))
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (width, 1))
     paint = (cv2.morphologyEx(rays, cv2.MORPH_TOPHAT, kernel) > config.contrast) & inside
-    seen = inside.sum(axis=0)
-    painted = paint.sum(axis=0)
+    painted = np.count_nonzero(paint, axis=0)
     cover = np.where(
         (seen >= config.min_rows) & (painted >= config.min_paint_rows),
         painted / np.maximum(seen, 1),
@@ -221,10 +241,10 @@ def lane_lines(
     )
     peaks = peaks[(peaks >= reach) & (peaks < len(cover) - reach)]
     ts = -config.reach + peaks * config.step
+    near = cv2.dilate(paint.view(np.uint8), np.ones((1, 5), np.uint8))  # within 2 columns
     dashed = np.array(
         [
-            _dashed(paint[:, max(0, i - 2) : i + 3].any(axis=1)[inside[:, i]], config)
-            and cover[i] <= config.max_dashed
+            _dashed(near[inside[:, i], i] > 0, config) and cover[i] <= config.max_dashed
             for i in peaks
         ],
         bool,
