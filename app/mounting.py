@@ -22,11 +22,11 @@ class Mounting:
     (the vehicle stage sees every frame mirrored and its boxes come back mirrored,
     app/traffic.py), the picture's turn in degrees anticlockwise (levelled with the lens; None:
     read off the vehicles' rear edges or the lane lines' spacing, `camera_cal.level`, and
-    levelled from then on) and
-    which way the camera looks (`FACINGS`: "auto" reads it from the road's motion,
-    `app.facts.Facing`; "rear" is a rear camera's file as its lens sees the road, its sides
-    swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one saved mirrored,
-    as a rear-view mirror shows the road, its writing backwards and its sides as ahead), and
+    levelled from then on) and which way the camera looks (`FACINGS`: "auto" reads it from the
+    road's motion, `app.facts.Facing`; "rear" is a rear camera's file as its lens sees the
+    road, its sides swapped, so the vehicle stage sees its frames mirrored; "rear-mirrored" one
+    saved mirrored, as a rear-view mirror shows the road, its writing backwards and its sides
+    as ahead), and
     the lens's focal length in 35 mm terms (None: the shipped camera's; sets the distances of a
     camera without a calibration, see `camera_cal.undistort.focal_scale_height`), and the
     spacing of the lane dashes on the roads it films, in metres, from which the road's length

@@ -200,13 +200,14 @@ class Pipeline:
         self.frames_from: Callable[[int], Generator[Frame, None, None]] | None = None
         self._horizon_found = False  # the footage showed its horizon in some frame
         self._roll = 0.0  # the turn the frames are levelled by
-        self._level: RollReading | None = None  # the edges' lean, read until it is known
+        # The edges' lean and the lane lines' spacing, read until the turn is known.
+        self._level: RollReading | None = None
         # The turn read off the footage and the frame from which it was levelled, if any, and
         # whether the lane lines read it (else the vehicles' rear edges).
         self.levelled: tuple[float, int] | None = None
         self.levelled_by_lines = False
-        # The turn the edges imply where the user stated another (None: they agree, or too
-        # few edges to tell).
+        # The turn the picture reads where the user stated another (None: they agree, or too
+        # few edges and lines to tell).
         self.roll_contradicted: float | None = None
 
     def __enter__(self) -> Pipeline:
