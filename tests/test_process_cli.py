@@ -325,6 +325,34 @@ def test_a_camera_mounted_askew_is_levelled_with_roll(data_dir: Path, tmp_path: 
     assert not out.exists()
 
 
+def _turned_runs(
+    video: Path, folder: Path, turn: float
+) -> dict[str, tuple[list[dict[str, Any]], str]]:
+    """`video` undistorted and turned `turn` degrees anticlockwise about its centre, run without
+    a calibration untold ("read") and told `--roll 0` ("left"), and undistorted level
+    ("level"): each run's record and what `process` said."""
+    from app.reframe import Framing, write_reframed
+    from camera_cal import default_calibration_path, load_calibration
+
+    calibration = load_calibration(default_calibration_path())
+    runs: dict[str, tuple[list[dict[str, Any]], str]] = {}
+    for name, angle, extra in (
+        ("read", turn, ()),
+        ("left", turn, ("--roll", "0")),
+        ("level", 0.0, ()),
+    ):
+        clip = folder / f"{name}.mp4"
+        write_reframed(video, Framing(name, roll=angle), clip, calibration)
+        record = folder / f"{name}.jsonl"
+        result = run_cli(
+            "process", clip, "-o", folder / f"{name}_out.mp4", "--json", record,
+            "--calibration", "none", *extra,
+        )  # fmt: skip
+        assert result.returncode == 0, result.stderr
+        runs[name] = (read_record(record), result.stdout + result.stderr)
+    return runs
+
+
 @pytest.mark.slow
 def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
     data_dir: Path, tmp_path: Path
@@ -338,24 +366,11 @@ def test_a_turned_picture_is_levelled_by_its_vehicles_rear_edges(
     (`--roll 0`), the turn stands and `process` says what turn the edges read instead; the
     clip level reads no turn and is told nothing."""
     from app.evaluate import evaluate, load_labels
-    from app.reframe import Framing, turned_labels, write_reframed
-    from camera_cal import default_calibration_path, load_calibration
+    from app.reframe import turned_labels
     from vehicles.detections import iou_matrix
 
-    video = data_dir / "videos" / "test_video.mp4"
-    calibration = load_calibration(default_calibration_path())
     level = load_labels(data_dir / "labels" / "test_video.json")
-    runs: dict[str, tuple[list[dict[str, Any]], str]] = {}
-    for name, turn, extra in (("read", 3.0, ()), ("left", 3.0, ("--roll", "0")), ("level", 0, ())):
-        clip = tmp_path / f"{name}.mp4"
-        write_reframed(video, Framing(name, roll=turn), clip, calibration)
-        record = tmp_path / f"{name}.jsonl"
-        result = run_cli(
-            "process", clip, "-o", tmp_path / f"{name}_out.mp4", "--json", record,
-            "--calibration", "none", *extra,
-        )  # fmt: skip
-        assert result.returncode == 0, result.stderr
-        runs[name] = (read_record(record), result.stdout + result.stderr)
+    runs = _turned_runs(data_dir / "videos" / "test_video.mp4", tmp_path, 3.0)
     rows, said = runs["read"]
     levelled = [r["frame"] for r in rows if "roll_deg" in r]
     assert levelled and levelled[0] <= 25 and levelled == list(range(levelled[0], len(rows)))
@@ -410,24 +425,10 @@ def test_a_turned_picture_is_levelled_by_its_lane_lines(data_dir: Path, tmp_path
     its cars are found than left turned (`--roll 0`), as precisely. The clip level reads no
     turn and is told nothing."""
     from app.evaluate import evaluate, load_labels
-    from app.reframe import Framing, turned_labels, write_reframed
-    from camera_cal import default_calibration_path, load_calibration
+    from app.reframe import turned_labels
 
-    video = data_dir / "videos" / "project_cut_1.mp4"
-    calibration = load_calibration(default_calibration_path())
     level = load_labels(data_dir / "labels" / "project_cut_1.json")
-    runs: dict[str, tuple[list[dict[str, Any]], str]] = {}
-    copies = (("read", -3.0, ()), ("left", -3.0, ("--roll", "0")), ("level", 0.0, ()))
-    for name, turn, extra in copies:
-        clip = tmp_path / f"{name}.mp4"
-        write_reframed(video, Framing(name, roll=turn), clip, calibration)
-        record = tmp_path / f"{name}.jsonl"
-        result = run_cli(
-            "process", clip, "-o", tmp_path / f"{name}_out.mp4", "--json", record,
-            "--calibration", "none", *extra,
-        )  # fmt: skip
-        assert result.returncode == 0, result.stderr
-        runs[name] = (read_record(record), result.stdout + result.stderr)
+    runs = _turned_runs(data_dir / "videos" / "project_cut_1.mp4", tmp_path, -3.0)
     rows, said = runs["read"]
     levelled = [r["frame"] for r in rows if "roll_deg" in r]
     assert levelled and levelled[0] <= 50 and levelled == list(range(levelled[0], len(rows)))
