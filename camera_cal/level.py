@@ -253,11 +253,15 @@ def lane_lines(
     return ts.astype(np.float64), dashed
 
 
+def _searched_turns(config: LatticeConfig) -> NDArray[np.float64]:
+    """The turns (degrees) a turn is sought among: within `search_deg`, `search_step_deg` apart."""
+    return np.arange(-config.search_deg, config.search_deg + 1e-9, config.search_step_deg)
+
+
 def _equal_spacing_turn(ts: NDArray[np.float64], config: LatticeConfig) -> float | None:
     """The turn (degrees anticlockwise) that, taken back, leaves three lines' t (left to right
     or right to left) equally spaced: the one root within the search, or None."""
-    search = np.arange(-config.search_deg, config.search_deg + 1e-9, config.search_step_deg)
-    turns = np.radians(search)
+    turns = np.radians(_searched_turns(config))
     angles = np.arctan(ts)
     back = np.tan(angles[None, :] - turns[:, None])
     gap = (back[:, 1] - back[:, 0]) - (back[:, 2] - back[:, 1])
@@ -358,7 +362,7 @@ class LaneLattice:
         if len(self._turns) < c.least:
             return None
         turns = np.fromiter(self._turns, np.float64)
-        grid = np.arange(-c.search_deg, c.search_deg + 1e-9, c.search_step_deg)
+        grid = _searched_turns(c)
         density = np.exp(-0.5 * ((grid[:, None] - turns[None, :]) / c.bandwidth_deg) ** 2)
         commonest = grid[int(np.argmax(density.sum(axis=1)))]
         near = np.abs(turns - commonest) <= c.agree_deg
@@ -376,7 +380,6 @@ class RollReading:
         self.config = config if config is not None else LevelConfig()
         self._leans: deque[tuple[int, float]] = deque(maxlen=keep)
         self.lattice = LaneLattice(self.config.lattice)
-        self.by_lines = False  # the turn last read came from the lane lines
 
     def reset(self) -> None:
         """Forget the leans and the lines' turns (another shot, perhaps another camera)."""
@@ -417,9 +420,9 @@ class RollReading:
     @property
     def full(self) -> bool:
         """Whether it holds as many leans as it keeps and has read the lines for as long as it
-        reads them: enough to have found a turn, so a picture they did not find turned may be
-        taken as level."""
-        return self._leans_full and self.lattice.done
+        reads them, or the leans read level (which the lines cannot overrule): enough to have
+        found a turn, so a picture they did not find turned may be taken as level."""
+        return self._leans_full and (self.lattice.done or self._leans_turn() == 0.0)
 
     @property
     def readings(self) -> int:
@@ -432,15 +435,22 @@ class RollReading:
         to a tenth; None while too few leans are in, they disagree, or they say level, and the
         lane lines read none (or the leans say level: lanes of unequal width read as a turn).
         `by_lines` tells which read it."""
-        c = self.config
-        self.by_lines = False
         leans = self._leans_turn()
         if leans is not None:
             return None if leans == 0.0 else leans
+        return self._lines_turn()
+
+    @property
+    def by_lines(self) -> bool:
+        """Whether the turn `roll_deg` reads is the lane lines' (the leans say nothing)."""
+        return self._leans_turn() is None and self._lines_turn() is not None
+
+    def _lines_turn(self) -> float | None:
+        """The turn the lane lines read, rounded to a tenth, where it is one to level by."""
+        c = self.config
         turn = self.lattice.turn_deg
         if turn is None or not c.min_roll_deg <= abs(turn) <= c.max_roll_deg:
             return None
-        self.by_lines = True
         return round(turn, 1)
 
     def _leans_turn(self) -> float | None:
