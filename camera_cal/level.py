@@ -381,11 +381,6 @@ class RollReading:
         self._leans: deque[tuple[int, float]] = deque(maxlen=keep)
         self.lattice = LaneLattice(self.config.lattice)
 
-    def reset(self) -> None:
-        """Forget the leans and the lines' turns (another shot, perhaps another camera)."""
-        self._leans.clear()
-        self.lattice = LaneLattice(self.config.lattice)
-
     def update(
         self,
         rgb: NDArray[np.uint8],
