@@ -110,7 +110,8 @@ class LaneConfig:
     middle_line_rows: float = 0.2
     # A line inside the lane drawn (one of its sides made up at the standard width, or its lines
     # further apart than this) bounds ours where the camera is this far or further from it; on
-    # the line the car is astride, and the carriageway between the outer lines is where it is.
+    # the line the car is astride, and the carriageway between the outer lines is where it is,
+    # unless one of them was made up (then there is none: the made-up side cannot say which).
     one_lane_max_m: float = 4.6
     astride_m: float = 0.9
     # A lane no wider than `one_lane_max_m` holds no line along its middle: paint there in this

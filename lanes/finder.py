@@ -342,8 +342,9 @@ class LaneFinder:
         (a thin dashed line has too little paint for a side of its own, and the side was made
         up across it; a kerb or fence was taken for a side beyond a solid edge line). A note
         of it, or None; and why there is no lane where the camera is astride a solid line
-        inside a narrow one (one of its sides is no lane line), or None. The road slants by
-        `slant` columns a row in the view (see `camera_from`)."""
+        inside a narrow one (one of its sides is no lane line) or astride a line inside one
+        with a side made up (which lane is ours the made-up side cannot say), or None. The
+        road slants by `slant` columns a row in the view (see `camera_from`)."""
         cfg = self.config
         bh = view.size[1]
         lines = self._history_lane(view)
@@ -361,6 +362,8 @@ class LaneFinder:
         if abs(apart_m) < cfg.astride_m:
             if narrow:
                 return None, f"astride a solid line inside a {width_m:.1f} m lane"
+            if made_up:
+                return None, "astride a line inside it, one of its sides made up"
             return None, None
         margin = max(1, int(cfg.prior_margin_m / view.xm_per_px))
         fit = fit_line(prior_search(paint, curve, margin), self._max_bend(view))

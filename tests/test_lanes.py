@@ -359,6 +359,31 @@ def test_no_lane_is_drawn_astride_a_solid_line_along_its_middle() -> None:
             assert any("astride a solid line" in note for note in results[-1].status)
 
 
+def test_no_lane_is_drawn_astride_a_line_inside_a_side_made_up() -> None:
+    """One edge line and a dashed line, nothing where the lane's other side would be: that
+    side is made up at the standard width. With the camera astride the dashes (on them, or
+    0.3 m off), the made-up lane holds them and cannot say which lane is ours: none is drawn,
+    and the result says why (India's and the night clip's lanes straddling their dashed
+    dividers, 163 frames, were such). With the dashes 1.2 m from the camera, they bound our
+    lane and it is drawn."""
+    config = LaneConfig()
+    finder, _ = _painted_road([])
+    view = finder.view((1280, 720))
+    bw = view.size[0]
+    edge = (config.dst_left_x, 0.0, 1.0, 0.15)
+    for off_m, drawn in ((0.0, False), (0.3, False), (1.2, True)):
+        x = (view.camera_point[0] + off_m / view.xm_per_px) / bw
+        dashes = [(x, k / 4, k / 4 + 0.08, 0.15) for k in range(4)]
+        finder, frame = _painted_road([edge, *dashes])
+        results = [finder.process(frame) for _ in range(4)]
+        assert all((r.lane is not None) == drawn for r in results), [r.status for r in results]
+        if drawn:
+            assert results[-1].lane is not None
+            assert results[-1].lane.width_m < config.lane_width_m - 0.5  # the dashes bound it
+        else:
+            assert any("one of its sides made up" in note for note in results[-1].status)
+
+
 def test_a_lane_of_two_measures_two_lanes_and_moves_the_ground_scale() -> None:
     """A 5 m carriageway with a dashed line along its middle (3 m dashes every 10 m), the tuned
     camera 0.5 m from the dashes: plausible as one lane, it is drawn, but its width sample is
@@ -457,11 +482,15 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
     # Past the crossing (41 s on) the car runs beside the median's fence: lanes were drawn on
     # the fence and the kerb, 2.1-2.4 m left of the camera (checked by eye), in 80 % of the
     # frames; the camera outside a lane makes it none of ours, and none is drawn in 95 %.
+    # Since a lane with a side made up is not drawn astride a line inside it, the frames
+    # before the junction with a lane went 81 -> 71 %: the car straddling the dashed divider
+    # (7-20 s, 24-25 s; checked by eye at frames 184, 380, 411, 425, 460, 490, 610 and 630),
+    # drawn from the edge line to a side made up mid-lane beyond the dashes.
     rows = process_clip(
         wild_dir / "india_highway_wildfilms.mp4", tmp_path, "--no-vehicles", "--calibration", "none"
     )
     road = [r for r in rows if r["time_s"] < 34.5]
-    assert sum(r["lane"] is not None for r in road) >= 0.68 * len(road)
+    assert sum(r["lane"] is not None for r in road) >= 0.65 * len(road)
     # The white edge line's centre at rows 300 and 340 of frames 12, 20, 29 and 35 (read off
     # their pixels, checked by eye; in between it moves straight), the kerb 40-60 px beyond.
     edge = {12: (514, 566), 20: (519, 580), 29: (506, 565), 35: (530, 590)}
@@ -488,7 +517,7 @@ def test_a_lane_on_a_highway_seen_by_a_camera_turned_sideways(
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("clip", "share"), [("night_highway_istock", 0.95), ("rural_2lane_wet", 0.85)]
+    ("clip", "share"), [("night_highway_istock", 0.8), ("rural_2lane_wet", 0.85)]
 )
 def test_no_lane_is_drawn_across_a_line_the_camera_is_off(
     wild_dir: Path, clip: str, share: float
@@ -500,7 +529,10 @@ def test_no_lane_is_drawn_across_a_line_the_camera_is_off(
     before its ground scale was learned). The line inside now bounds ours, and the lane it
     bounds is drawn: the night road's reads 2.3-2.5 m at the far row of the view and 3.0 m
     near, believed since the floor is the near rows' (87 % of the frames had a lane with the
-    floor at every row; the rural road's first second has none until its scale is learned)."""
+    floor at every row; the rural road's first second has none until its scale is learned).
+    The night clip
+    draws a lane in 84 % of its frames (97 % before: in 74 frames, 397-550, a side was made up
+    across the centre dashes the car straddled; checked by eye at 405, 455, 490 and 533)."""
     from app.pipeline import Pipeline
     from app.sources import probe_video, read_frames
     from lanes.finder import MIDDLE_SHARES

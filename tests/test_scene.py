@@ -386,7 +386,9 @@ def test_an_unknown_camera_reads_its_horizon_ahead(wild_dir: Path, tmp_path: Pat
     # Read ahead: no frame is placed by the default, and the first frames have their lane.
     assert all(abs(r["horizon_y"] - default) > 0.2 * default for r in rows)
     assert sum(1 for r in rows[:5] if r["lane"]) >= 4
-    assert sum(1 for r in rows if r["lane"]) >= 0.9 * len(rows)
+    # (A run of the whole clip draws the same 87 of these 129 frames: none where the car
+    # straddles the centre dashes with a side made up; 121 before that was refused.)
+    assert sum(1 for r in rows if r["lane"]) >= 0.6 * len(rows)
     # The horizon read ahead is the one the frames then read themselves.
     assert abs(rows[0]["horizon_y"] - waiting[-1]["horizon_y"]) < 0.02 * info.size[1]
 
