@@ -86,6 +86,36 @@ def test_vanishing_point_and_bars_of_a_synthetic_road() -> None:
     assert all(fixed.update(frame).horizon_y == 222.0 for _ in range(8))
 
 
+def test_the_vanishing_column_follows_a_road_that_turned() -> None:
+    """Past a junction the road runs another way: once 8 estimates in a row agree on a column
+    off the window's median, the older ones are dropped and the column (and the lanes' warp)
+    follows at once; a turn of 7 estimates, or estimates that scatter, leave it. A median over
+    the whole window of 60 would still read the old road (India's junction: about 7 s)."""
+    size = (960, 540)
+
+    def columns(tracker: SceneTracker, column: float, frames: int) -> list[float | None]:
+        road = _road(size, (column, 260.0), bars=80)
+        return [tracker.update(road).vanishing_x for _ in range(frames)]
+
+    turned = SceneTracker(size, default_horizon=300.0, every=1)
+    assert abs((columns(turned, 480.0, 60)[-1] or 0) - 480) < 4
+    after = columns(turned, 640.0, 12)
+    assert all(abs((x or 0) - 480) < 4 for x in after[:7])  # the old road's column ...
+    assert abs((after[-1] or 0) - 640) < 4  # ... until the new one stands
+    assert abs(turned.placement["vanishing_x"] - 640) < 4
+    brief = SceneTracker(size, default_horizon=300.0, every=1)
+    columns(brief, 480.0, 60)
+    columns(brief, 640.0, 7)
+    assert abs((columns(brief, 480.0, 20)[-1] or 0) - 480) < 4
+    assert all(abs((x or 0) - 480) < 4 for x in columns(brief, 640.0, 7))
+    scattered = SceneTracker(size, default_horizon=300.0, every=1)
+    columns(scattered, 480.0, 60)
+    for _ in range(10):  # two roads in turn: their estimates never agree
+        columns(scattered, 600.0, 1)
+        columns(scattered, 680.0, 1)
+    assert abs((scattered.current.vanishing_x or 0) - 480) < 4
+
+
 def test_a_picture_is_monochrome_after_three_samples_without_colour() -> None:
     """The live picture's colour is sampled every 5th frame: three samples in a row without any
     make the scene monochrome (a camera switching to infrared at night, read 0.4-0.6 s after);
