@@ -377,9 +377,11 @@ def decoding_notes(info: VideoInfo) -> list[str]:
         notes.append("interlaced video: deinterlaced while decoding")
     if not square(info.pixel_aspect):
         shown = info.reduced_from or info.size
+        # Three digits, four near 1 (a 853x481 rescale tagged 1.0025 read "1 times").
+        digits = 3 if abs(info.pixel_aspect - 1.0) >= 0.01 else 4
         notes.append(
-            f"pixels stored {info.pixel_aspect:.3g} times as wide as tall: stretched square, "
-            f"{shown[0]}x{shown[1]}"
+            f"pixels stored {info.pixel_aspect:.{digits}g} times as wide as tall: stretched "
+            f"square, {shown[0]}x{shown[1]}"
         )
     if info.frame_times is not None:
         times = np.asarray(info.frame_times)

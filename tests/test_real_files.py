@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -146,6 +147,19 @@ def test_hdr_video_without_the_tone_map_filters_is_decoded_and_says_so(
     plain = next(read_frames(made["pq"], info)).astype(float).mean()
     assert plain < mapped - 15
     assert "no zscale and tonemap filters" in " ".join(sources.decoding_notes(info))
+
+
+def test_a_pixel_aspect_near_one_is_told_to_four_digits() -> None:
+    """A rescale tagged with pixels 1.0025 times as wide as tall (853x481 shown as 856x481) is
+    told as 1.002 or 1.003, not "1 times"; an anamorphic 4:3 as 1.33; square pixels not."""
+
+    def note(aspect: float) -> str:
+        info = sources.VideoInfo((856, 481), 25.0, 25, 1.0, False, pixel_aspect=aspect)
+        return " ".join(sources.decoding_notes(info))
+
+    assert re.search(r"stored 1\.00[23] times as wide", note(7696 / 7677))
+    assert "stored 1.33 times as wide" in note(4 / 3)
+    assert "times as wide" not in note(1.0)
 
 
 def test_anamorphic_video_is_seen_with_square_pixels(
