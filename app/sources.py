@@ -85,6 +85,12 @@ class VideoInfo:
     interlaced: bool = False
     # The lens's focal length in 35 mm terms as the file's tag states it (a phone's), or None.
     focal_mm: float | None = None
+    # What ffmpeg said of a damaged file (its last error: "partial file" where a camera's
+    # recording was cut off), or None. The frames that decode are processed all the same.
+    damage: str | None = None
+    # Seconds of video the file states (its index or header); beyond `duration` where the
+    # damage cut the frames short.
+    stated_duration: float = 0.0
 
 
 def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
@@ -316,11 +322,6 @@ def probe_video(path: Path) -> VideoInfo:
         raise InputError(
             f"{path} is not a video ffmpeg can read; pass an .mp4/.mov/.mkv/.webm file"
         )
-    if facts.errors:
-        raise InputError(
-            f"{path} is truncated or damaged (ffmpeg: {facts.errors[-1]}); "
-            "re-export or re-download the video"
-        )
     video_start_s = max(
         0.0,
         (facts.file_start if facts.video_start is None else facts.video_start) - facts.file_start,
@@ -340,6 +341,11 @@ def probe_video(path: Path) -> VideoInfo:
         if facts.packets is not None:
             n_frames = min(n_frames, facts.packets) if n_frames > 0 else facts.packets
     duration = n_frames / facts.fps if facts.fps > 0 else 0.0
+    if facts.errors and (facts.fps <= 0 or n_frames <= 0):
+        raise InputError(
+            f"{path} is truncated or damaged, and no frame of it decodes (ffmpeg: "
+            f"{facts.errors[-1]}); re-export or re-download the video"
+        )
     if facts.fps <= 0 or min(facts.size) <= 0 or n_frames <= 0:
         raise InputError(f"{path} has no video frames; the file may be truncated or empty")
     width, height = square_size(facts.size, facts.pixel_aspect)
@@ -358,6 +364,8 @@ def probe_video(path: Path) -> VideoInfo:
         video_start_s=video_start_s,
         frame_times=frame_times,
         focal_mm=facts.focal_mm,
+        damage=facts.errors[-1] if facts.errors else None,
+        stated_duration=facts.duration,
     )
 
 
@@ -395,12 +403,29 @@ def decoding_notes(info: VideoInfo) -> list[str]:
             f"twice or more, {len(times) - distinct} skipped), so the output keeps time with "
             "the sound"
         )
+    if info.damage is not None:
+        notes.append(damage_note(info))
     if info.reduced_from is not None:
         (fw, fh), (w, h) = info.reduced_from, info.size
         notes.append(
             f"{fw}x{fh} is processed and written at {w}x{h} (--max-size 0 keeps the full size)"
         )
     return notes
+
+
+def damage_note(info: VideoInfo) -> str:
+    """What is processed of a damaged file: the frames that decode (a dashcam's recording cut
+    off by a power cut keeps its start), and how much of the video its index states is lost."""
+    if info.stated_duration > info.duration + 1.0 / info.fps:
+        return (
+            f"cut short (ffmpeg: {info.damage}): it stops after {info.duration:.1f} s of the "
+            f"{info.stated_duration:.1f} s it states; the frames up to there are processed, "
+            "the rest is lost"
+        )
+    return (
+        f"damaged (ffmpeg: {info.damage}): its frames are processed as they decode, damaged "
+        "blocks filled in by ffmpeg, where lanes and vehicles may be misread"
+    )
 
 
 def square(pixel_aspect: float) -> bool:

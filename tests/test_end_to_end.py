@@ -20,6 +20,7 @@ from tests.helpers import (
     assert_one_line_error,
     count_frames,
     interruptible,
+    process_clip,
     read_record,
     run_cli,
 )
@@ -57,8 +58,13 @@ def clips(tmp_path_factory: pytest.TempPathFactory, test_video: Path) -> dict[st
             ],
             check=True,
         )
+    whole = test_video.read_bytes()  # its index first, as a streaming copy has it
     out["truncated"] = folder / "truncated.mp4"
-    out["truncated"].write_bytes(test_video.read_bytes()[:400_000])
+    out["truncated"].write_bytes(whole[:400_000])
+    out["undecodable"] = folder / "undecodable.mp4"
+    out["undecodable"].write_bytes(whole[:2_000])  # the index, no whole frame
+    out["damaged"] = folder / "damaged.mp4"
+    out["damaged"].write_bytes(whole[:400_000] + bytes(20_000) + whole[420_000:])
     out["empty"] = folder / "empty.mp4"
     out["empty"].write_bytes(b"")
     return out
@@ -132,13 +138,45 @@ def test_another_aspect_ratio_is_another_camera(clips: dict[str, Path], tmp_path
     assert not list(named.iterdir())
 
 
-@pytest.mark.parametrize(("clip", "fragment"), [("truncated", "truncated"), ("empty", "empty")])
+@pytest.mark.parametrize(
+    ("clip", "fragment"), [("undecodable", "no frame of it decodes"), ("empty", "empty")]
+)
 def test_bad_videos(clips: dict[str, Path], tmp_path: Path, clip: str, fragment: str) -> None:
     out, record = tmp_path / "o.mp4", tmp_path / "o.jsonl"
     result = run_cli("process", clips[clip], "-o", out, "--json", record)
     assert_one_line_error(result, fragment)
     assert not out.exists() and not record.exists()
     assert not list(tmp_path.iterdir())  # no temporary files left either
+
+
+def test_a_file_cut_short_is_processed_up_to_the_cut(
+    clips: dict[str, Path], test_video: Path, tmp_path: Path
+) -> None:
+    """A recording cut part-way (a dashcam losing power, a copy stopped) keeps its start: the
+    frames that decode are processed as the whole file's are, and the note says what is lost."""
+    record = tmp_path / "cut.jsonl"
+    result = run_cli("process", clips["truncated"], "-o", tmp_path / "cut.mp4", "--json", record)
+    assert result.returncode == 0, result.stderr
+    assert "cut short (ffmpeg:" in result.stderr and "of the 1.5 s it states" in result.stderr
+    cut = read_record(record)
+    whole = process_clip(test_video, tmp_path, "--end", "1.0")
+    assert 5 <= len(cut) < len(whole)
+    assert cut == whole[: len(cut)]
+    _, frames = count_frames(tmp_path / "cut.mp4")
+    assert frames == len(cut)
+
+
+def test_a_file_damaged_mid_way_is_processed_with_a_note(
+    clips: dict[str, Path], tmp_path: Path
+) -> None:
+    """Bytes lost in the middle: the frames are processed as ffmpeg decodes them, and the note
+    says where lanes and vehicles may be misread."""
+    record = tmp_path / "o.jsonl"
+    result = run_cli("process", clips["damaged"], "-o", tmp_path / "o.mp4", "--json", record)
+    assert result.returncode == 0, result.stderr
+    assert "damaged (ffmpeg:" in result.stderr and "may be misread" in result.stderr
+    assert "cut short" not in result.stderr
+    assert len(read_record(record)) >= 36  # of test_video's 38
 
 
 def test_corrupt_calibration_and_model(clips: dict[str, Path], tmp_path: Path) -> None:
