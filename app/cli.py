@@ -385,12 +385,21 @@ def process_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
+    after: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="PREV",
+            help="The video this one goes on from, a dashcam's previous file of the drive: "
+            "its last 10 s are run first, unrecorded, so the scene, lanes and vehicles go on "
+            "as they were.",
+        ),
+    ] = None,
 ) -> None:
     """Undistort and annotate a video or still; optionally write the per-frame record."""
     from app.annotators import default_annotators
     from app.assembly import build_stages
     from app.drivers import process_still, process_video
-    from app.outputs import plan_outputs
+    from app.outputs import check_after, plan_outputs
     from app.sources import check_input, is_image
 
     check_input(source)
@@ -399,6 +408,8 @@ def process_command(
     )
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
+    if after is not None:
+        check_after(after, source, outputs, start)
     output, record = outputs.media, outputs.record
     cal = _calibration(calibration)
     still = is_image(source)
@@ -433,6 +444,7 @@ def process_command(
             calibration_required=_named(calibration),
             max_size=max_size,
             mounting=mounting,
+            after=after,
         )
     written = [str(p) for p in (summary.record, summary.events_file) if p is not None]
     typer.echo(

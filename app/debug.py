@@ -282,7 +282,7 @@ def run_debug(
     ensure_writable_dir(out_dir)
     start = 0 if from_start else max(0, first - round(WARMUP_S * info.fps))
     pipeline.prepare(info.size, info.fps, start)
-    look_ahead(pipeline, source, info, start, last)
+    look_ahead(pipeline, lambda k: read_frames(source, info, start + k, last))
     annotators = default_annotators(insets=True)
     written: list[Path] = []
     names: list[str] = []

@@ -246,18 +246,79 @@ def camera_for(
     return lens_for(calibration, mounting, info.size, info.focal_mm, name, required, log)
 
 
-def look_ahead(pipeline: Pipeline, source: Path, info: VideoInfo, first: int, last: int) -> None:
-    """Let a prepared `pipeline` read an unknown camera's horizon ahead of each shot of
-    `source` from frame `first` (up to `last`): the first shot's now (`Pipeline.look_ahead`,
+def look_ahead(
+    pipeline: Pipeline, frames_from: Callable[[int], Generator[Frame, None, None]]
+) -> None:
+    """Let a prepared `pipeline` read an unknown camera's horizon ahead of each shot of the
+    frames `frames_from(k)` gives from its k-th on: the first shot's now (`Pipeline.look_ahead`,
     which reads as many frames as its stages would wait), a shot's after a cut as it comes
     (`Pipeline.frames_from`). A second decoder, for a known camera never started."""
-
-    def frames_from(k: int) -> Generator[Frame, None, None]:
-        return read_frames(source, info, first + k, last)
-
     pipeline.frames_from = frames_from
     with closing(frames_from(0)) as frames:
         pipeline.look_ahead(frames)
+
+
+# Seconds of the part before that `--after` runs first: the scene's vanishing points (60, one
+# every third frame: 6-7 s), the lines' and the tracks' history (a second or two) are as they
+# were at its end; what is learned over longer (the length scale read off the dashes) is not.
+# It costs as much time as processing them (without drawing or encoding).
+LEAD_IN_S = 10.0
+
+
+@dataclass(frozen=True)
+class LeadIn:
+    """The end of the part of a drive before a video (`--after`): its last `frames` frames,
+    from `start`, are run first and not recorded, so the stages start with its history."""
+
+    source: Path
+    info: VideoInfo
+    start: int
+    frames: int
+
+    def followed_by(
+        self, k: int, then: Generator[Frame, None, None]
+    ) -> Generator[Frame, None, None]:
+        """The lead-in's frames from its k-th, then those of `then`."""
+        yield from read_frames(self.source, self.info, self.start + k)
+        yield from then
+
+
+def lead_in(
+    after: Path, info: VideoInfo, source: Path, max_size: int, log: Callable[[str], None]
+) -> LeadIn | None:
+    """The lead-in of `source` from `after`, the part of the drive before it (its last
+    `LEAD_IN_S`), or None, said in `log`, where `after` cannot be read or is of another size
+    or frame rate (not the same camera's)."""
+    try:
+        before = within_size(probe_video(after), max_size)
+    except InputError as error:
+        log(f"note: {error}; it is not run first, {source.name} starts afresh")
+        return None
+    if before.size != info.size or abs(before.fps - info.fps) > 0.01 * info.fps:
+        log(
+            f"note: {after.name} ({before.size[0]}x{before.size[1]}, {before.fps:.4g} fps) is "
+            f"not of the camera that filmed {source.name} ({info.size[0]}x{info.size[1]}, "
+            f"{info.fps:.4g} fps): it is not run first, {source.name} starts afresh"
+        )
+        return None
+    frames = min(before.n_frames, round(LEAD_IN_S * before.fps))
+    log(
+        f"note: {source.name} goes on from {after.name}: its last {frames / before.fps:.1f} s "
+        "are run first, so the scene, lanes and vehicles start as they were there"
+    )
+    return LeadIn(after, before, before.n_frames - frames, frames)
+
+
+def within_part(events: Sequence[Event], first: int, fps: float) -> tuple[Event, ...]:
+    """The `events` as they show in the part that starts at frame `first`: those that ended in
+    the lead-in before it are left out, and one under way at its start starts there."""
+    return tuple(
+        replace(event, start_frame=first, start_s=first / fps)
+        if event.start_frame < first
+        else event
+        for event in events
+        if event.end_frame >= first
+    )
 
 
 def process_video(
@@ -276,6 +337,7 @@ def process_video(
     calibration_required: bool = True,
     max_size: int = 0,
     mounting: Mounting | None = None,
+    after: Path | None = None,
 ) -> RunSummary:
     """Process a video into an annotated video, a record and/or an events file; outputs appear
     only on success (`log` hears what decoding changes: HDR tone-mapped, pixels made square;
@@ -288,7 +350,9 @@ def process_video(
     The `mounting` the user states (`Mounting`: the horizon row, the camera's height, traffic
     keeping left, the picture's turn) takes the place of what the footage would tell; a video
     whose shorter side exceeds `max_size` pixels (0: none) is processed and written at that size
-    (`within_size`; the mounting's horizon is a row of the video as stored).
+    (`within_size`; the mounting's horizon is a row of the video as stored). A video that goes
+    on from `after`, the part of the drive before it (a dashcam's previous file), starts with
+    the history the stages had at its end (`lead_in`).
     """
     warm_up = warm_up_opencv()
     try:
@@ -300,6 +364,7 @@ def process_video(
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
         focal_mm = recorded_focal_mm(calibration, mounting)
+        lead = None if after is None else lead_in(after, info, source, max_size, log)
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()
@@ -310,8 +375,16 @@ def process_video(
         Pipeline(calibration, lanes, vehicles, vehicles_in_worker, mounting) as pipeline,
         ExitStack() as sinks,
     ):
-        pipeline.prepare(info.size, info.fps, first)
-        look_ahead(pipeline, source, info, first, last)
+        led = 0 if lead is None else lead.frames  # the lead-in's frames, run first
+        pipeline.prepare(info.size, info.fps, first - led)
+
+        def frames_from(k: int, end: int | None = last) -> Generator[Frame, None, None]:
+            if k >= led:
+                return read_frames(source, info, first + k - led, end)
+            assert lead is not None
+            return lead.followed_by(k, read_frames(source, info, first, end))
+
+        look_ahead(pipeline, frames_from)
         records = sinks.enter_context(RecordSink(record)) if record is not None else None
         video = None
         if output is not None:
@@ -328,13 +401,16 @@ def process_video(
                 )
             )
         # Without --end every decoded frame is read (the probed count is an estimate).
-        decoded = prefetch(read_frames(source, info, first, last if end_s is not None else None))
+        decoded = prefetch(frames_from(0, last if end_s is not None else None))
         # Colour is looked for in every 5th frame of the first 2 s: a fade from black or a
         # camera starting up shows none at first.
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         scales: list[float] = []  # the lanes' ground scale at each frame
         aims: list[float] = []  # the vanishing point's column off the live middle, in widths
-        for offset, out in enumerate(pipeline.stream(decoded)):
+        for started_at, out in enumerate(pipeline.stream(decoded)):
+            offset = started_at - led
+            if offset < 0:
+                continue  # the lead-in: history, not output
             index = first + offset
             if (scene := out.result.scene) is not None:
                 scales.append(scene.ground_scale)
@@ -363,8 +439,8 @@ def process_video(
                 f"{source} is truncated or damaged: decoded {count} of {expected} frames; "
                 "re-export or re-download the video"
             )
-        if pipeline.cuts:
-            at = ", ".join(f"{frame / info.fps:.1f} s" for frame in pipeline.cuts)
+        if cuts := [frame for frame in pipeline.cuts if frame >= first]:
+            at = ", ".join(f"{frame / info.fps:.1f} s" for frame in cuts)
             log(
                 f"note: {source.name} cuts to another shot at {at}; the stages started over "
                 "there (the scene measured afresh where another camera's picture begins)"
@@ -373,7 +449,8 @@ def process_video(
         if facing is not None:
             log(f"note: {source.name} is {facing}")
         if pipeline.levelled is not None:
-            said = levelled_note(*pipeline.levelled, info.fps, pipeline.levelled_by_lines)
+            turn, frame = pipeline.levelled  # levelled in the lead-in: from the start
+            said = levelled_note(turn, max(frame, first), info.fps, pipeline.levelled_by_lines)
             log(f"note: {source.name}: {said}")
         if pipeline.roll_contradicted is not None:
             said = roll_contradicted_note(mounting.roll_deg or 0.0, pipeline.roll_contradicted)
@@ -387,7 +464,7 @@ def process_video(
             log(f"note: {source.name}: {dashes}")
         if (aim := aim_note(float(np.median(aims)) if aims else None)) is not None:
             log(f"note: {source.name}: {aim}")
-        events = tuple(pipeline.finish_events())
+        events = within_part(tuple(pipeline.finish_events()), first, info.fps)
         if events_file is not None:
             event_sink = sinks.enter_context(RecordSink(events_file))
             for event in events:

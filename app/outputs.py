@@ -13,7 +13,7 @@ from pathlib import Path
 
 from app.errors import InputError
 from app.sinks import CONTAINERS
-from app.sources import IMAGE_SUFFIXES, is_image
+from app.sources import IMAGE_SUFFIXES, check_input, is_image
 
 
 @dataclass(frozen=True)
@@ -107,6 +107,26 @@ def plan_outputs(
             if other is not None and _same_path(events, other):
                 raise InputError(f"--events {events} is also {option}; give it another name")
     return Outputs(output, record, events)
+
+
+def check_after(after: Path, source: Path, outputs: Outputs, start_s: float) -> None:
+    """`--after PREV` must name another existing video than the input, none of the outputs,
+    and go with a video processed from its start (the lead-in is what comes before that)."""
+    check_input(after)
+    if is_image(source):
+        raise InputError("--after needs a video (a part of a drive); drop it for a still")
+    if is_image(after):
+        raise InputError(f"--after {after} is a still; give the video this one goes on from")
+    if _same_path(after, source):
+        raise InputError(f"--after {after} is the input; give the video before it")
+    named = ((outputs.media, "-o"), (outputs.record, "--json"), (outputs.events, "--events"))
+    for path, option in named:
+        if path is not None and _same_path(after, path):
+            raise InputError(f"{option} {path} is the --after video; choose another {option}")
+    if start_s > 0:
+        raise InputError(
+            "--after runs the video before this one's start; it cannot go with --start"
+        )
 
 
 def check_debug_folder(folder: Path, source: Path) -> None:
