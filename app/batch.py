@@ -16,7 +16,7 @@ import socket
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -42,6 +42,8 @@ class BatchInput:
 
     path: Path
     relative: Path  # the input's path below the folder it was found in (or its name)
+    # The video this one goes on from (`process --after`; see `in_drives`), or None.
+    after: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,18 @@ def find_inputs(items: Iterable[Path]) -> list[BatchInput]:
             "their common parent folder instead"
         )
     return list(found.values())
+
+
+def in_drives(entries: Sequence[BatchInput]) -> list[BatchInput]:
+    """The inputs as parts of drives, as a dashcam splits one into files a minute or a few long:
+    each goes on from the one before it in name order in its folder (`BatchInput.after`)."""
+    chained: list[BatchInput] = []
+    last_in: dict[Path, BatchInput] = {}
+    for entry in sorted(entries, key=lambda e: (str(e.path.parent), e.path.name)):
+        before = last_in.get(entry.path.parent)
+        chained.append(replace(entry, after=None if before is None else before.path))
+        last_in[entry.path.parent] = entry
+    return chained
 
 
 def fingerprint(path: Path, chunk: int = 1 << 20) -> str:
@@ -208,6 +222,7 @@ def _run_video(entry: BatchInput, options: BatchOptions) -> tuple[int, float, li
         max_size=options.max_size,
         mounting=options.mounting,
         log=notes.append,
+        after=entry.after,
     )
     # The tables are made from the record, so they say exactly what `process` would record.
     rows = list(read_record(record))

@@ -483,9 +483,16 @@ def batch_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
+    drives: Annotated[
+        bool,
+        typer.Option(
+            help="The videos in each folder are parts of one camera's drives, in name order, "
+            "as a dashcam splits them: each goes on from the one before (process --after).",
+        ),
+    ] = False,
 ) -> None:
     """Process many videos on Dask (local cluster or --scheduler); resumable; Parquet table."""
-    from app.batch import BatchOptions, find_inputs, run_batch, summary_line
+    from app.batch import BatchOptions, find_inputs, in_drives, run_batch, summary_line
 
     mounting = _mounting(
         None, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
@@ -494,6 +501,8 @@ def batch_command(
     entries = find_inputs(inputs)
     if not entries:
         raise InputError("no video files found in the inputs; pass videos, folders or a .txt list")
+    if drives:
+        entries = in_drives(entries)
     _calibration(calibration)  # a bad calibration fails here, once, not in every task
     options = BatchOptions(
         out=out.resolve(),

@@ -7,8 +7,10 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+import pyarrow.parquet as pq
 import pytest
 
+from app.batch import BatchInput, in_drives
 from app.drivers import within_part
 from app.events import Event
 from app.sources import ffmpeg_binary
@@ -132,3 +134,47 @@ def test_an_event_under_way_at_the_start_starts_there() -> None:
         ("lane_change_left", 50, 2.0, 70),
         ("close_following", 60, 2.4, 90),
     ]
+
+
+def test_batch_drives_run_each_part_after_the_one_before(
+    parts: dict[str, Path], tmp_path: Path
+) -> None:
+    folder = tmp_path / "camera"
+    folder.mkdir()
+    for name in ("part1", "part2"):
+        (folder / f"{name}.mp4").write_bytes(parts[name].read_bytes())
+    out = tmp_path / "out"
+    result = run_cli("batch", folder, "--out", out, "--workers", "1", "--no-video", "--drives")
+    assert result.returncode == 0, result.stdout + result.stderr
+    single = run_cli(
+        "process",
+        folder / "part2.mp4",
+        "--after",
+        folder / "part1.mp4",
+        "-o",
+        tmp_path / "o.mp4",
+        "--json",
+        tmp_path / "o.jsonl",
+    )
+    assert single.returncode == 0, single.stderr
+    assert read_record(out / "part2.jsonl") == read_record(tmp_path / "o.jsonl")
+    rows = {
+        Path(str(r["path"])).name: r
+        for r in pq.read_table(out / "table/manifest.parquet").to_pylist()
+    }
+    assert "goes on from part1.mp4" in str(rows["part2.mp4"]["notes"])
+    assert "goes on from" not in str(rows["part1.mp4"]["notes"])
+
+
+def test_drives_chain_each_folder_in_name_order() -> None:
+    """Each video goes on from the one before it in name order in its own folder (a dashcam's
+    names sort by time); the first of a folder starts afresh."""
+    paths = [Path(p) for p in ("b/0900.mp4", "a/0801.mp4", "b/0859.mp4", "a/0800.mp4")]
+    entries = [BatchInput(p, p) for p in paths]
+    chained = {str(e.path): None if e.after is None else str(e.after) for e in in_drives(entries)}
+    assert chained == {
+        "a/0800.mp4": None,
+        "a/0801.mp4": "a/0800.mp4",
+        "b/0859.mp4": None,
+        "b/0900.mp4": "b/0859.mp4",
+    }
