@@ -514,7 +514,9 @@ def _decode(path: Path, info: VideoInfo, seek_s: float | None) -> Generator[Fram
         "-map",
         "0:v:0",
         "-fps_mode",
-        "passthrough",
+        # A damaged file's frame that does not decode is filled with the one before (a steady
+        # rate kept), so the frames after it keep their times; others pass as they are.
+        "cfr" if info.damage is not None and info.frame_times is None else "passthrough",
     ]
     filters = []
     if info.interlaced:
