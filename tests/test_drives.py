@@ -63,23 +63,21 @@ def _first_boxed(record: list[dict[str, Any]]) -> int:
     return next(k for k, row in enumerate(record) if row["vehicles"])
 
 
+def _after(part: Path, before: Path, folder: Path) -> subprocess.CompletedProcess[str]:
+    """`roadview process PART --after BEFORE`, its video and record `o.*` in `folder`."""
+    return run_cli(
+        "process", part, "--after", before, "-o", folder / "o.mp4", "--json", folder / "o.jsonl"
+    )
+
+
 def test_a_part_after_the_one_before_is_recorded_as_the_whole_drive(
     parts: dict[str, Path], tmp_path: Path
 ) -> None:
     whole = process_clip(parts["joined"], tmp_path / "whole")
-    result = run_cli(
-        "process",
-        parts["part2"],
-        "--after",
-        parts["part1"],
-        "-o",
-        tmp_path / "after.mp4",
-        "--json",
-        tmp_path / "after.jsonl",
-    )
+    result = _after(parts["part2"], parts["part1"], tmp_path)
     assert result.returncode == 0, result.stderr
     assert "part2.mp4 goes on from part1.mp4" in result.stderr
-    after = read_record(tmp_path / "after.jsonl")
+    after = read_record(tmp_path / "o.jsonl")
     alone = process_clip(parts["part2"], tmp_path / "alone")
     assert len(after) == len(alone) == len(whole) - SPLIT
     assert [row["frame"] for row in after] == list(range(len(after)))
@@ -90,16 +88,7 @@ def test_a_part_after_the_one_before_is_recorded_as_the_whole_drive(
 
 
 def test_a_part_of_another_camera_is_not_run_first(parts: dict[str, Path], tmp_path: Path) -> None:
-    result = run_cli(
-        "process",
-        parts["part2"],
-        "--after",
-        parts["small"],
-        "-o",
-        tmp_path / "o.mp4",
-        "--json",
-        tmp_path / "o.jsonl",
-    )
+    result = _after(parts["part2"], parts["small"], tmp_path)
     assert result.returncode == 0, result.stderr
     assert "small.mp4 (640x360, 25 fps) is not of the camera" in result.stderr
     alone = process_clip(parts["part2"], tmp_path / "alone")
@@ -146,16 +135,7 @@ def test_batch_drives_run_each_part_after_the_one_before(
     out = tmp_path / "out"
     result = run_cli("batch", folder, "--out", out, "--workers", "1", "--no-video", "--drives")
     assert result.returncode == 0, result.stdout + result.stderr
-    single = run_cli(
-        "process",
-        folder / "part2.mp4",
-        "--after",
-        folder / "part1.mp4",
-        "-o",
-        tmp_path / "o.mp4",
-        "--json",
-        tmp_path / "o.jsonl",
-    )
+    single = _after(folder / "part2.mp4", folder / "part1.mp4", tmp_path)
     assert single.returncode == 0, single.stderr
     assert read_record(out / "part2.jsonl") == read_record(tmp_path / "o.jsonl")
     rows = {
