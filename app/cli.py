@@ -546,16 +546,26 @@ def debug_command(
             "made them (the scales learned, the tracks; default: from 6 s before them)."
         ),
     ] = False,
+    after: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="PREV",
+            help="The video this one goes on from (see process --after): run first where the "
+            "run starts at the clip's first frame.",
+        ),
+    ] = None,
 ) -> None:
     """Write every intermediate of the chosen frames as PNGs, with an index.html to step through."""
     from app.assembly import build_stages
     from app.debug import parse_frames, run_debug
-    from app.outputs import check_debug_folder
+    from app.outputs import check_debug_folder, check_lead
     from app.pipeline import Pipeline
     from app.sources import check_input
 
     span = parse_frames(frames)
     check_input(source)
+    if after is not None:
+        check_lead(after, source)
     folder = out if out is not None else source.with_name(f"{source.stem}_debug")
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
@@ -576,6 +586,7 @@ def debug_command(
         calibration_required=_named(calibration),
         max_size=_max_size(max_size),
         from_start=from_start,
+        after=after,
     )
     typer.echo(f"wrote {len(written)} files; open {folder / 'index.html'}")
 

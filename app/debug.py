@@ -20,7 +20,7 @@ from app.annotators import (
     lane_inset,
     offset_words,
 )
-from app.drivers import camera_for, look_ahead
+from app.drivers import camera_for, lead_in, look_ahead, part_frames
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -28,7 +28,6 @@ from app.sources import (
     Frame,
     decoding_notes,
     probe_video,
-    read_frames,
     within_size,
 )
 from camera_cal import SceneGeometry
@@ -262,13 +261,16 @@ def run_debug(
     calibration_required: bool = True,
     max_size: int = 0,
     from_start: bool = False,
+    after: Path | None = None,
 ) -> list[Path]:
     """Process the clip up to the chosen frames and write their intermediates; returns files.
     The pipeline's calibration is left out for a clip of another aspect ratio unless
     `calibration_required` (see `calibration_for`); a clip whose shorter side exceeds
     `max_size` pixels (0: none) is seen at that size, as `process` sees it. The clip is run
     from `WARMUP_S` before the first chosen frame, or `from_start`: then every history (the
-    ground and length scales, the lines', the tracks') is the one `process` had there."""
+    ground and length scales, the lines', the tracks') is the one `process` had there. A run
+    from the clip's first frame goes on from `after`, the part of the drive before it, as
+    `process --after` does (its last `LEAD_IN_S` run first)."""
     info = within_size(probe_video(source), max_size)
     for note in decoding_notes(info):
         log(f"note: {source.name}: {note}")
@@ -281,14 +283,24 @@ def run_debug(
     last = min(last, info.n_frames)
     ensure_writable_dir(out_dir)
     start = 0 if from_start else max(0, first - round(WARMUP_S * info.fps))
-    pipeline.prepare(info.size, info.fps, start)
-    look_ahead(pipeline, lambda k: read_frames(source, info, start + k, last))
+    lead = None
+    if after is not None and start == 0:
+        lead = lead_in(after, info, source, max_size, log)
+    elif after is not None:
+        log(
+            f"note: the run starts {start / info.fps:.1f} s into {source.name}, so {after.name} "
+            "is not run first (--from-start runs it first)"
+        )
+    led = 0 if lead is None else lead.frames
+    pipeline.prepare(info.size, info.fps, start - led)
+    frames_from = part_frames(source, info, start, lead)
+    look_ahead(pipeline, lambda k: frames_from(k, last))
     annotators = default_annotators(insets=True)
     written: list[Path] = []
     names: list[str] = []
     done: list[int] = []
-    for offset, frame in enumerate(read_frames(source, info, start, last)):
-        index = start + offset
+    for offset, frame in enumerate(frames_from(0, last)):
+        index = start + offset - led  # negative in the lead-in
         out = pipeline.run(frame)
         if index < first:
             continue

@@ -309,6 +309,22 @@ def lead_in(
     return LeadIn(after, before, before.n_frames - frames, frames)
 
 
+def part_frames(
+    source: Path, info: VideoInfo, first: int, lead: LeadIn | None
+) -> Callable[[int, int | None], Generator[Frame, None, None]]:
+    """`frames_from(k, end)`: the frames of the `lead` in, if any, then `source`'s from `first`
+    (up to `end`), from the k-th of them all on."""
+    led = 0 if lead is None else lead.frames
+
+    def frames_from(k: int, end: int | None) -> Generator[Frame, None, None]:
+        if k >= led:
+            return read_frames(source, info, first + k - led, end)
+        assert lead is not None
+        return lead.followed_by(k, read_frames(source, info, first, end))
+
+    return frames_from
+
+
 def within_part(events: Sequence[Event], first: int, fps: float) -> tuple[Event, ...]:
     """The `events` as they show in the part that starts at frame `first`: those that ended in
     the lead-in before it are left out, and one under way at its start starts there."""
@@ -377,14 +393,8 @@ def process_video(
     ):
         led = 0 if lead is None else lead.frames  # the lead-in's frames, run first
         pipeline.prepare(info.size, info.fps, first - led)
-
-        def frames_from(k: int, end: int | None = last) -> Generator[Frame, None, None]:
-            if k >= led:
-                return read_frames(source, info, first + k - led, end)
-            assert lead is not None
-            return lead.followed_by(k, read_frames(source, info, first, end))
-
-        look_ahead(pipeline, frames_from)
+        frames_from = part_frames(source, info, first, lead)
+        look_ahead(pipeline, lambda k: frames_from(k, last))
         records = sinks.enter_context(RecordSink(record)) if record is not None else None
         video = None
         if output is not None:

@@ -109,9 +109,8 @@ def plan_outputs(
     return Outputs(output, record, events)
 
 
-def check_after(after: Path, source: Path, outputs: Outputs, start_s: float) -> None:
-    """`--after PREV` must name another existing video than the input, none of the outputs,
-    and go with a video processed from its start (the lead-in is what comes before that)."""
+def check_lead(after: Path, source: Path) -> None:
+    """`--after PREV` must name an existing video other than the input, itself a video."""
     check_input(after)
     if is_image(source):
         raise InputError("--after needs a video (a part of a drive); drop it for a still")
@@ -119,6 +118,12 @@ def check_after(after: Path, source: Path, outputs: Outputs, start_s: float) -> 
         raise InputError(f"--after {after} is a still; give the video this one goes on from")
     if _same_path(after, source):
         raise InputError(f"--after {after} is the input; give the video before it")
+
+
+def check_after(after: Path, source: Path, outputs: Outputs, start_s: float) -> None:
+    """`process --after PREV` as `check_lead` says, naming none of the outputs, and with a
+    video processed from its start (the lead-in is what comes before that)."""
+    check_lead(after, source)
     named = ((outputs.media, "-o"), (outputs.record, "--json"), (outputs.events, "--events"))
     for path, option in named:
         if path is not None and _same_path(after, path):

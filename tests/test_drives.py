@@ -87,6 +87,25 @@ def test_a_part_after_the_one_before_is_recorded_as_the_whole_drive(
     assert _first_boxed(after) == 0 < _first_boxed(alone)
 
 
+def test_debug_after_shows_the_frames_process_after_made(
+    parts: dict[str, Path], tmp_path: Path
+) -> None:
+    """The debug mode goes on from the part before as `process --after` does: its first
+    frame's lane is the one that run recorded, not the one the part alone gives."""
+    assert _after(parts["part2"], parts["part1"], tmp_path).returncode == 0
+    after = read_record(tmp_path / "o.jsonl")[0]["lane"]
+    alone = process_clip(parts["part2"], tmp_path / "alone")[0]["lane"]
+    said = {}
+    for name, extra in (("after", ["--after", str(parts["part1"])]), ("alone", [])):
+        result = run_cli("debug", parts["part2"], "--frames", "0", "--out", tmp_path / name, *extra)
+        assert result.returncode == 0, result.stderr
+        said[name] = result.stderr
+    assert f"lane {after['width_m']:.2f} m wide" in said["after"]
+    assert "goes on from part1.mp4" in said["after"]
+    assert f"lane {alone['width_m']:.2f} m wide" in said["alone"]
+    assert f"{after['width_m']:.2f}" != f"{alone['width_m']:.2f}"
+
+
 def test_a_part_of_another_camera_is_not_run_first(parts: dict[str, Path], tmp_path: Path) -> None:
     result = _after(parts["part2"], parts["small"], tmp_path)
     assert result.returncode == 0, result.stderr
