@@ -20,7 +20,7 @@ from app.annotators import (
     lane_inset,
     offset_words,
 )
-from app.drivers import camera_for, lead_in, look_ahead, part_frames
+from app.drivers import camera_for, lead_in, start_part
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -291,10 +291,7 @@ def run_debug(
             f"note: the run starts {start / info.fps:.1f} s into {source.name}, so {after.name} "
             "is not run first (--from-start runs it first)"
         )
-    led = 0 if lead is None else lead.frames
-    pipeline.prepare(info.size, info.fps, start - led)
-    frames_from = part_frames(source, info, start, lead)
-    look_ahead(pipeline, lambda k: frames_from(k, last))
+    frames_from, led = start_part(pipeline, source, info, start, last, lead)
     annotators = default_annotators(insets=True)
     written: list[Path] = []
     names: list[str] = []

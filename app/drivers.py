@@ -246,18 +246,6 @@ def camera_for(
     return lens_for(calibration, mounting, info.size, info.focal_mm, name, required, log)
 
 
-def look_ahead(
-    pipeline: Pipeline, frames_from: Callable[[int], Generator[Frame, None, None]]
-) -> None:
-    """Let a prepared `pipeline` read an unknown camera's horizon ahead of each shot of the
-    frames `frames_from(k)` gives from its k-th on: the first shot's now (`Pipeline.look_ahead`,
-    which reads as many frames as its stages would wait), a shot's after a cut as it comes
-    (`Pipeline.frames_from`). A second decoder, for a known camera never started."""
-    pipeline.frames_from = frames_from
-    with closing(frames_from(0)) as frames:
-        pipeline.look_ahead(frames)
-
-
 # Seconds of the part before that `--after` runs first: the scene's vanishing points (60, one
 # every third frame: 6-7 s), the lines' and the tracks' history (a second or two) are as they
 # were at its end; what is learned over longer (the length scale read off the dashes) is not.
@@ -309,12 +297,22 @@ def lead_in(
     return LeadIn(after, before, before.n_frames - frames, frames)
 
 
-def part_frames(
-    source: Path, info: VideoInfo, first: int, lead: LeadIn | None
-) -> Callable[[int, int | None], Generator[Frame, None, None]]:
-    """`frames_from(k, end)`: the frames of the `lead` in, if any, then `source`'s from `first`
-    (up to `end`), from the k-th of them all on."""
+def start_part(
+    pipeline: Pipeline,
+    source: Path,
+    info: VideoInfo,
+    first: int,
+    last: int,
+    lead: LeadIn | None,
+) -> tuple[Callable[[int, int | None], Generator[Frame, None, None]], int]:
+    """Prepare `pipeline` for `source` from frame `first`, the frames of the `lead` in, if any,
+    run before it, and let it read an unknown camera's horizon ahead of each shot (up to
+    `last`): the first shot's now (`Pipeline.look_ahead`, which reads as many frames as its
+    stages would wait), a shot's after a cut as it comes (`Pipeline.frames_from`; a second
+    decoder, for a known camera never started). Returns `frames_from(k, end)`, the frames from
+    the k-th of them all on (the lead-in's first), and how many the lead-in has."""
     led = 0 if lead is None else lead.frames
+    pipeline.prepare(info.size, info.fps, first - led)
 
     def frames_from(k: int, end: int | None) -> Generator[Frame, None, None]:
         if k >= led:
@@ -322,7 +320,10 @@ def part_frames(
         assert lead is not None
         return lead.followed_by(k, read_frames(source, info, first, end))
 
-    return frames_from
+    pipeline.frames_from = lambda k: frames_from(k, last)
+    with closing(frames_from(0, last)) as frames:
+        pipeline.look_ahead(frames)
+    return frames_from, led
 
 
 def within_part(events: Sequence[Event], first: int, fps: float) -> tuple[Event, ...]:
@@ -391,10 +392,8 @@ def process_video(
         Pipeline(calibration, lanes, vehicles, vehicles_in_worker, mounting) as pipeline,
         ExitStack() as sinks,
     ):
-        led = 0 if lead is None else lead.frames  # the lead-in's frames, run first
-        pipeline.prepare(info.size, info.fps, first - led)
-        frames_from = part_frames(source, info, first, lead)
-        look_ahead(pipeline, lambda k: frames_from(k, last))
+        # The lead-in's `led` frames are run first, not recorded.
+        frames_from, led = start_part(pipeline, source, info, first, last, lead)
         records = sinks.enter_context(RecordSink(record)) if record is not None else None
         video = None
         if output is not None:
