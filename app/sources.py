@@ -341,12 +341,12 @@ def probe_video(path: Path) -> VideoInfo:
         if facts.packets is not None:
             n_frames = min(n_frames, facts.packets) if n_frames > 0 else facts.packets
     duration = n_frames / facts.fps if facts.fps > 0 else 0.0
-    if facts.errors and (facts.fps <= 0 or n_frames <= 0):
-        raise InputError(
-            f"{path} is truncated or damaged, and no frame of it decodes (ffmpeg: "
-            f"{facts.errors[-1]}); re-export or re-download the video"
-        )
     if facts.fps <= 0 or min(facts.size) <= 0 or n_frames <= 0:
+        if facts.errors:
+            raise InputError(
+                f"{path} is truncated or damaged, and no frame of it decodes (ffmpeg: "
+                f"{facts.errors[-1]}); re-export or re-download the video"
+            )
         raise InputError(f"{path} has no video frames; the file may be truncated or empty")
     width, height = square_size(facts.size, facts.pixel_aspect)
     if facts.rotation in (90, 270):
