@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from app.errors import FrameSizeChanged
 from app.events import Event, EventDetector, FrameSignals
-from app.facts import FactsTracker, FrameFacts, RoadGeometry
+from app.facts import FactsTracker, FrameFacts, RoadGeometry, along_scale
 from app.mounting import Mounting, camera_height_note, dash_note
 from app.sources import Frame
 from app.stages import FrameStage
@@ -109,6 +109,9 @@ class _Started:
     # The warp of this frame's metres (`Pipeline._view`; with the worker, the next frame is
     # started before this one finishes, and at a cut its warp is another scene's).
     view: BirdsEye | None = None
+    # The same warp placed at the scene's horizon as estimated, where that is not where the
+    # stages are placed (`Pipeline._measured`): the facts' metres.
+    measured: BirdsEye | None = None
     # The road's length scale and the dash spacing read as of this frame (`SceneTracker.length`).
     length: tuple[float, float | None] = (1.0, None)
 
@@ -178,6 +181,8 @@ class Pipeline:
         self._undistorter: Undistorter | None = None
         self._worker: StageWorker | None = None
         self._geometry: RoadGeometry | None = None
+        # The last warp placed at the measured horizon, by the view and horizon it was made for.
+        self._measured_view: tuple[tuple[BirdsEye, float], BirdsEye] | None = None
         self._default_horizon = 0.0  # the default warp's, where a scene starts (see `prepare`)
         self._scene: SceneTracker | None = None
         self._facts: FactsTracker | None = None
@@ -487,6 +492,7 @@ class Pipeline:
         self._started += 1
         if held:
             waiting = LaneResult(None, status=(WAITING,)) if self.lanes is not None else None
+            view = self._view(placement)
             return _Started(
                 undistorted,
                 scene,
@@ -497,7 +503,8 @@ class Pipeline:
                 index=index,
                 cut=cut,
                 roll_deg=self._roll,
-                view=self._view(placement),
+                view=view,
+                measured=self._measured(view, scene),
             )
         if self._worker is not None:
             self._worker.submit(undistorted, **self._for_vehicles(placement, scene))
@@ -516,8 +523,13 @@ class Pipeline:
                 road_x=scene.vanishing_x,
             )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
+        view = self._view(placement)
+        measured = self._measured(view, scene)
+        if lane is not None:
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
-            self._scene.observe_dashes(lane.dash_spacings)
+            # In the facts' metres, so the length scale read off them applies to the facts.
+            along = 1.0 if view is None or measured is None else along_scale(view, measured)
+            self._scene.observe_dashes(tuple(s * along for s in lane.dash_spacings))
         return _Started(
             undistorted,
             scene,
@@ -527,7 +539,8 @@ class Pipeline:
             index=index,
             cut=cut,
             roll_deg=self._roll,
-            view=self._view(placement),
+            view=view,
+            measured=measured,
             length=self._scene.length,
         )
 
@@ -546,6 +559,27 @@ class Pipeline:
             placement["vanishing_x"],
             placement["ground_scale"],
         )
+
+    def _measured(self, view: BirdsEye | None, scene: SceneGeometry) -> BirdsEye | None:
+        """`view` placed at the `scene`'s horizon as estimated, where the stages are placed
+        elsewhere (they follow it in steps; see `RoadGeometry`), else None: the same warp
+        otherwise (live box, scale, column, ground scale), kept while the horizon stays."""
+        if view is None or not scene.estimated or abs(scene.horizon_y - view.horizon_y) < 0.05:
+            return None
+        key = (view, scene.horizon_y)
+        if self._measured_view is None or self._measured_view[0] != key:
+            config = self.lanes.config if self.lanes is not None else LaneConfig()
+            measured = birdseye_for(
+                view.frame_size,
+                config,
+                scene.horizon_y,
+                view.live,
+                view.scale_height,
+                view.vanishing_x,
+                view.ground_scale,
+            )
+            self._measured_view = (key, measured)
+        return self._measured_view[1]
 
     def _read_roll(
         self, undistorted: Frame, detections: Detections, index: int, scene: SceneGeometry
@@ -632,9 +666,12 @@ class Pipeline:
         if (
             self._geometry is not None
             and current is not None
-            and current is not self._geometry.view
+            and (
+                current is not self._geometry.view
+                or started.measured is not self._geometry.measured
+            )
         ):
-            self._geometry = RoadGeometry.of(current)
+            self._geometry = RoadGeometry.of(current, started.measured)
         road_x = started.scene.vanishing_x
         if self._geometry is not None and self._geometry.road_x != road_x:
             self._geometry = replace(self._geometry, road_x=road_x)
