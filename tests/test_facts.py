@@ -194,7 +194,7 @@ def test_the_facts_read_their_metres_off_the_warp_at_the_horizon_measured() -> N
     assert RoadGeometry.of(placed).advance_scale == 1.0
     plain = FactsTracker(25.0).update(None, None, 0.5, RoadGeometry.of(placed))
     read = FactsTracker(25.0).update(None, None, 0.5, geometry)
-    assert plain.speed_kmh == pytest.approx(0.5 * 25 * 3.6)
+    assert plain.speed_kmh is not None and plain.speed_kmh == pytest.approx(0.5 * 25 * 3.6)
     assert read.speed_kmh == pytest.approx(plain.speed_kmh * along_scale(placed, measured))
 
 
