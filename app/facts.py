@@ -34,9 +34,10 @@ def along_scale(
     one picture whose horizons differ (the lane stage's, placed in steps, and the scene's as
     estimated) read the same stretch of road as of other lengths. The ratio is averaged over
     the picture's rows that part shows, along the camera's line: the motion is read off the
-    picture's pixels, which crowd into the view's far rows (four wild clips read placed 1.1 %
-    of the height below and above their horizon kept 0.93-1.02 of the gap so, against
-    1.13-1.39 uncorrected; averaged over the view's rows the ratio overshot on each)."""
+    picture's pixels, which crowd into the view's far rows (placed 1.1 % of the height below
+    and above four wild clips' horizons, the lane stage read their advance 1.13-1.39 times as
+    long; taken through this ratio, 0.93-1.02 times; averaged over the view's rows, the ratio
+    overshot on each clip)."""
     bw, bh = view.size
     ends = view.to_frame(np.array([[bw / 2, (1.0 - near) * bh], [bw / 2, float(bh)]]))[:, 1]
     rows = np.linspace(ends[0], ends[1], samples + 1)
