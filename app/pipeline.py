@@ -527,9 +527,12 @@ class Pipeline:
         measured = self._measured(view, scene)
         if lane is not None:
             self._scene.observe_lane_width(lane.width_sample, lane.width_believed)
-            # In the facts' metres, so the length scale read off them applies to the facts.
-            along = 1.0 if view is None or measured is None else along_scale(view, measured)
-            self._scene.observe_dashes(tuple(s * along for s in lane.dash_spacings))
+            spacings = lane.dash_spacings
+            if spacings and view is not None and measured is not None:
+                # In the facts' metres, so the length scale read off them applies to the facts.
+                along = along_scale(view, measured)
+                spacings = tuple(s * along for s in spacings)
+            self._scene.observe_dashes(spacings)
         return _Started(
             undistorted,
             scene,
