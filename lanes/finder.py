@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -13,10 +13,10 @@ from lanes.dashes import DashTrack, near_ends
 from lanes.line import Line
 from lanes.measure import (
     camera_from,
+    carried_fit,
     implausible_lane,
+    lane_figures,
     lane_widths,
-    radius_of_curvature,
-    reported_radius,
 )
 from lanes.motion import RoadMotion
 from lanes.perspective import BirdsEye, birdseye_for
@@ -54,6 +54,18 @@ class LaneEstimate:
     left_fit: Fit  # bird's-eye fits, x = a y^2 + b y + c
     right_fit: Fit
     width_m: float = math.nan  # between the boundaries at the bottom row
+
+    def read_in(
+        self, view: BirdsEye, measured: BirdsEye, road_x: float | None, straight_m: float
+    ) -> LaneEstimate:
+        """This lane, found in `view`, with its radius, offset and width read in `measured`: the
+        same warp placed at the horizon as estimated, where the stages are placed in steps off
+        it (see `carried_fit`). Its boundaries and fits stay the view's, as drawn and tracked;
+        `road_x` is the column the road runs to, as in `LaneFinder.process`."""
+        left, right = (carried_fit(f, view, measured) for f in (self.left_fit, self.right_fit))
+        slant = 0.0 if road_x is None else measured.slant_to(road_x)
+        radius, offset, width = lane_figures(left, right, measured, slant, straight_m)
+        return replace(self, curvature_m=radius, offset_m=offset, width_m=width)
 
 
 @dataclass(frozen=True, eq=False)
@@ -563,19 +575,7 @@ class LaneFinder:
         for fit in (left, right):
             pts = np.stack([evaluate_fit(fit, bird_rows), bird_rows], axis=1)
             polylines.append(view.to_frame(pts))
-        radii = [
-            radius_of_curvature(f, bh, view.xm_per_px, view.ym_per_px, cfg.straight_radius_m)
-            for f in (left, right)
-        ]
-        # The mean of curvatures (not radii) so one near-straight line does not dominate.
-        curvature = float(np.mean([1.0 / r for r in radii]))
-        radius = reported_radius(curvature, cfg.straight_radius_m)
-        # Camera minus lane centre (positive right of it), read where the camera is: on the
-        # road below the view's bottom row.
-        offset = camera_from(
-            (left + right) / 2, bh, view.camera_point, slant, view.xm_per_px, view.ym_per_px
-        )
-        width = float(lane_widths(left, right, np.array([bh]))[0] * view.xm_per_px)
+        radius, offset, width = lane_figures(left, right, view, slant, cfg.straight_radius_m)
         # Outside once past the line's paint (its fit is the paint's middle): over it, the
         # camera is still on the lane's edge.
         if abs(offset) > cfg.max_offset_share * width + cfg.line_width_m / 2:

@@ -953,6 +953,49 @@ def test_a_camera_turned_sideways_reads_its_place_in_the_lane(
     assert view is not None and view.camera_column == (640.0 if placed is None else placed)
 
 
+@pytest.mark.parametrize(
+    ("turn_deg", "camera_m", "horizon_y"), [(0.0, 0.4, 420.0), (1.0, -0.6, 300.0)]
+)
+def test_a_lanes_figures_are_read_at_the_horizon_wherever_the_stage_is_placed(
+    turn_deg: float, camera_m: float, horizon_y: float
+) -> None:
+    """A lane bending at a 600 m radius seen by a known camera, found with the view placed 10
+    rows (1.4 % of the height) above and below its horizon, as the scene places the stages in
+    steps: placed, its width reads 3.54-3.83 m, its radius 310-770 m; read in the warp at the
+    horizon (`LaneEstimate.read_in`), each within 2 cm and 5 % of what the view placed there
+    reads, and the camera's offset within 2 cm."""
+    radius_m = 600.0
+    lines = [
+        (z * z / (2 * radius_m) + a, z * z / (2 * radius_m) + b, z, z + 0.5)
+        for z in np.arange(1.0, 150.0, 0.5)
+        for a, b in ((-1.925, -1.775), (1.775, 1.925))
+    ]
+    camera = road_camera(turn_deg, camera_m, horizon_y=horizon_y)
+    frame, vanishing_x = seen_road(lines, camera, horizon_y)
+    config = LaneConfig()
+    measured = birdseye_for((1280, 720), config, horizon_y)
+    found = {}
+    for placed in (horizon_y - 10, horizon_y, horizon_y + 10):
+        finder = LaneFinder(config)
+        for _ in range(3):
+            result = finder.process(frame, horizon_y=placed, road_x=vanishing_x)
+        assert result.lane is not None and finder.current_view is not None, result.status
+        read = result.lane.read_in(
+            finder.current_view, measured, vanishing_x, config.straight_radius_m
+        )
+        found[placed] = (result.lane, read)
+    truth = found[horizon_y][0]
+    assert found[horizon_y][1].width_m == pytest.approx(truth.width_m, abs=1e-3)
+    for placed in (horizon_y - 10, horizon_y + 10):
+        lane, read = found[placed]
+        assert abs(lane.width_m - truth.width_m) > 0.08
+        assert abs(lane.curvature_m / truth.curvature_m - 1) > 0.25
+        assert read.width_m == pytest.approx(truth.width_m, abs=0.02)
+        assert read.curvature_m == pytest.approx(truth.curvature_m, rel=0.05)
+        assert read.offset_m == pytest.approx(truth.offset_m, abs=0.02)
+        assert read.left is lane.left and np.array_equal(read.left_fit, lane.left_fit)
+
+
 def test_paint_inside_a_lane_is_measured_between_its_lines() -> None:
     """The share of a lane's inside that is painted: none for an empty lane, the bars' share
     for bars across it, and nothing of its own lines (kept out by the margin) nor of what
