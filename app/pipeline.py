@@ -129,6 +129,19 @@ def lengthened(
     return replace(lane, lane=replace(lane.lane, curvature_m=radius))
 
 
+def measured_in(
+    lane: LaneResult | None, started: _Started, straight_m: float
+) -> LaneResult | None:
+    """The lane stage's result with its lane's radius, offset and width read in the warp at
+    the horizon as estimated (`_Started.measured`), as the facts' metres are, where the stages
+    are placed elsewhere: placed 1.1 % of the height above and below US winter's horizon, the
+    lane stage read its width 3.21 and 3.67 m."""
+    if lane is None or lane.lane is None or started.view is None or started.measured is None:
+        return lane
+    read = lane.lane.read_in(started.view, started.measured, started.scene.vanishing_x, straight_m)
+    return replace(lane, lane=read)
+
+
 class Pipeline:
     """Undistorts frames of one size and runs the lane and vehicle stages on them.
 
@@ -686,6 +699,7 @@ class Pipeline:
                 self._geometry,
             ).scaled(*started.length)
         straight = self.lanes.config.straight_radius_m if self.lanes is not None else math.inf
+        lane = measured_in(lane, started, straight)
         lane = lengthened(lane, started.length[0], straight)
         events: tuple[Event, ...] = ()
         if self._fps > 0:  # events need time: not for a still
