@@ -10,6 +10,7 @@ pipeline (for the video's banner and `--events`) and over a saved record (`roadv
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -41,6 +42,8 @@ class EventConfig:
     settle_margin_m: float = 0.15  # back inside by this much ...
     settle_s: float = 0.5  # ... for this long ends a departure or a change
     change_jump_m: float = 1.2  # the offset jumping across the centre: we are in the next lane
+    change_lead_s: float = 3.0  # a change spans at most this long before the jump ...
+    change_tail_s: float = 3.0  # ... and after it: a wheel over the line longer drives on it
     lane_lost_s: float = 2.0  # no lane for this long ends an excursion where it was last seen
     headway_s: float = 1.0  # close following: headway under this ...
     headway_exit_s: float = 1.2  # ... (ends at or above this) ...
@@ -178,7 +181,10 @@ class _Below:
 
 class _Excursion:
     """History of a wheel over a lane boundary: a departure when it comes back into the same
-    lane, a change when the lane finder's offset jumps across (it now sees the next lane)."""
+    lane, a change when the lane finder's offset jumps across (it now sees the next lane). A
+    change spans at most `change_lead_s` before the jump and `change_tail_s` after it: a car
+    that keeps a wheel over the line longer drives on it, which is a departure of its own (the
+    part before, or an excursion from the new lane's line after)."""
 
     def __init__(self, config: EventConfig) -> None:
         self.config = config
@@ -186,13 +192,31 @@ class _Excursion:
         self._last: FrameSignals | None = None  # the last frame with a lane
         self._came_back: FrameSignals | None = None  # first frame of the current run inside
         self._side = 0.0  # +1 over the right boundary, -1 over the left
-        self._changed = False
-        self._worst = 0.0
+        self._worst = 0.0  # the largest |offset| before a change
+        # The excursion's frames with a lane over the last change_lead_s, each with the
+        # |offset| it counts to the worst (none once changed); the last frame dropped from
+        # them, and the worst of those dropped: where a change before the jump may start.
+        self._recent: deque[tuple[FrameSignals, float]] = deque()
+        self._dropped: FrameSignals | None = None
+        self._dropped_worst = 0.0
+        self._jump: FrameSignals | None = None  # the change under way: the frame it jumped at
+        self._change: tuple[FrameSignals, float] | None = None  # ... its first frame, worst
+        self._before: Event | None = None  # ... and the departure before it, if any
 
     def reset(self) -> None:
         """Forget any excursion under way."""
-        self._start = self._last = self._came_back = None
-        self._changed = False
+        self._start = self._last = self._came_back = self._dropped = self._jump = None
+        self._change = self._before = None
+        self._recent.clear()
+
+    def _begin(self, s: FrameSignals) -> None:
+        """Start an excursion at `s`, a frame over a boundary."""
+        assert s.offset_m is not None
+        self.reset()
+        self._start = self._last = s
+        self._side = math.copysign(1.0, s.offset_m)
+        self._worst = self._dropped_worst = abs(s.offset_m)
+        self._recent.append((s, abs(s.offset_m)))
 
     def _limit(self, s: FrameSignals) -> float:
         """The |offset| at which a wheel touches a boundary (lane widths kept to 2.5-5 m)."""
@@ -201,41 +225,70 @@ class _Excursion:
             width = LANE_WIDTH_M
         return (min(max(width, 2.5), 5.0) - self.config.car_width_m) / 2
 
-    def _event(self, end: FrameSignals) -> Event | None:
+    def _drop_before(self, time_s: float) -> None:
+        """Drop the recent frames from before `time_s` (a change cannot start there)."""
+        while self._recent and self._recent[0][0].time_s < time_s:
+            self._dropped, worst = self._recent.popleft()
+            self._dropped_worst = max(self._dropped_worst, worst)
+
+    def _jumped(self, s: FrameSignals) -> None:
+        """The offset jumped across the centre at `s`, away from the side it went over: the
+        change starts `change_lead_s` before (or where the excursion did, when what is before
+        that is too short to count as a departure)."""
         start = self._start
         assert start is not None
-        counts = self._changed or end.time_s - start.time_s >= self.config.departure_hold_s
-        if not counts:
-            return None
-        kind = "lane_departure"
-        if self._changed:
-            kind = "lane_change_right" if self._side > 0 else "lane_change_left"
-        worst = round(float(self._worst), 3)
-        return Event(kind, start.frame, end.frame, start.time_s, end.time_s, None, worst)
+        self._jump, self._before = s, None
+        self._drop_before(s.time_s - self.config.change_lead_s)
+        dropped = self._dropped
+        if dropped is None or dropped.time_s - start.time_s < self.config.departure_hold_s:
+            self._change = (start, round(float(self._worst), 3))
+            return
+        first = self._recent[0][0] if self._recent else s
+        worst = max((w for _, w in self._recent), default=0.0)
+        self._change = (first, round(float(worst), 3))
+        worst = round(float(self._dropped_worst), 3)
+        self._before = Event(
+            "lane_departure", start.frame, dropped.frame, start.time_s, dropped.time_s, None, worst
+        )
+
+    def _events(self, end: FrameSignals) -> tuple[Event, ...]:
+        """The excursion's events, were it to end at `end`: a departure, or a change and the
+        departure before it where the wheel was over the line longer than a change takes."""
+        start = self._start
+        assert start is not None
+        if self._change is None:
+            if end.time_s - start.time_s < self.config.departure_hold_s:
+                return ()
+            worst = round(float(self._worst), 3)
+            kind = "lane_departure"
+            return (Event(kind, start.frame, end.frame, start.time_s, end.time_s, None, worst),)
+        first, worst = self._change
+        kind = "lane_change_right" if self._side > 0 else "lane_change_left"
+        change = Event(kind, first.frame, end.frame, first.time_s, end.time_s, None, worst)
+        return (change,) if self._before is None else (self._before, change)
 
     @property
     def active(self) -> Event | None:
-        """The excursion under way, once it counts."""
+        """The excursion's event under way, once it counts."""
         if self._start is None or self._last is None:
             return None
-        return self._event(self._last)
+        events = self._events(self._last)
+        return events[-1] if events else None
 
-    def update(self, s: FrameSignals) -> Event | None:
-        """Feed one frame; returns an excursion that ended."""
+    def update(self, s: FrameSignals) -> tuple[Event, ...]:
+        """Feed one frame; returns the events of an excursion that ended."""
         cfg = self.config
         if self._start is None:
             if s.offset_m is not None and abs(s.offset_m) > self._limit(s):
-                self._start = self._last = s
-                self._side = math.copysign(1.0, s.offset_m)
-                self._changed, self._came_back, self._worst = False, None, abs(s.offset_m)
-            return None
+                self._begin(s)
+            return ()
         assert self._last is not None
         if s.offset_m is None:
             if s.time_s - self._last.time_s >= cfg.lane_lost_s:
-                ended = self._event(self._last)
+                ended = self._events(self._last)
                 self.reset()
                 return ended
-            return None
+            return ()
         previous = self._last.offset_m
         assert previous is not None
         # Jumping across the centre is a change; jumping back undoes it (the finder had locked
@@ -243,24 +296,39 @@ class _Excursion:
         if abs(s.offset_m - previous) >= cfg.change_jump_m and math.copysign(
             1.0, s.offset_m
         ) != math.copysign(1.0, previous):
-            self._changed = math.copysign(1.0, s.offset_m) != self._side
+            if math.copysign(1.0, s.offset_m) != self._side:
+                self._jumped(s)
+            else:
+                self._jump = self._change = self._before = None
+        inside = abs(s.offset_m) < self._limit(s) - cfg.settle_margin_m
+        jump = self._jump
+        if jump is not None and not inside and s.time_s - jump.time_s >= cfg.change_tail_s:
+            # Changed, and still over the new lane's line: the change ends, the car is on it.
+            ended = self._events(self._last)
+            self.reset()
+            if abs(s.offset_m) > self._limit(s):
+                self._begin(s)
+            return ended
         self._last = s
-        if abs(s.offset_m) < self._limit(s) - cfg.settle_margin_m:
+        counted = 0.0 if self._jump is not None or inside else abs(s.offset_m)
+        self._recent.append((s, counted))
+        self._drop_before(s.time_s - cfg.change_lead_s)
+        if inside:
             if self._came_back is None:
                 self._came_back = s
             if s.time_s - self._came_back.time_s >= cfg.settle_s:
-                ended = self._event(self._came_back)
+                ended = self._events(self._came_back)
                 self.reset()
                 return ended
         else:
             self._came_back = None
-            if not self._changed:
+            if self._jump is None:
                 self._worst = max(self._worst, abs(s.offset_m))
-        return None
+        return ()
 
-    def finish(self) -> Event | None:
+    def finish(self) -> tuple[Event, ...]:
         """End of the footage: the excursion under way, if it counts."""
-        ended = self._event(self._last) if self._start is not None and self._last else None
+        ended = self._events(self._last) if self._start is not None and self._last else ()
         self.reset()
         return ended
 
@@ -300,7 +368,7 @@ class EventDetector:
         """Feed one frame; returns the events under way at it."""
         self._kinds = {**REAR_KINDS, **({} if s.mirrored else SWAPPED_SIDES)} if s.rear else {}
         for ended in (
-            self._excursion.update(s),
+            *self._excursion.update(s),
             self._following.update(s, s.headway_s),
             self._closing.update(s, s.ttc_s),
         ):
@@ -316,7 +384,7 @@ class EventDetector:
 
     def close(self) -> None:
         """End what is under way (the footage cut to another shot); the events found stay."""
-        for ended in (self._excursion.finish(), self._following.finish(), self._closing.finish()):
+        for ended in (*self._excursion.finish(), self._following.finish(), self._closing.finish()):
             if ended is not None:
                 self.events.append(self._seen(ended))
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from dataclasses import replace
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +113,33 @@ def test_a_jump_across_and_straight_back_is_no_lane_change() -> None:
     assert [e.kind for e in find_events(_series(offsets))] == ["lane_departure"]
 
 
+def test_a_car_on_the_line_before_and_after_a_change_departs_and_changes_apart() -> None:
+    """A wheel over the right line for 8 s, the offset jumping across (the finder now sees the
+    next lane) and the other wheel over that lane's left line for 8 s before settling: a
+    change spans at most 3 s either side of the jump, and the wheel over a line before and
+    after it is a departure of each side; the banner shows each as it runs."""
+    offsets = _ramp((0.0, 1.2, 1.0), (1.2, 1.2, 8.0))  # over the line (0.95 m) from 0.8 s
+    jump = len(offsets)  # 9 s
+    offsets += _ramp((-1.3, -1.3, 8.0), (-1.3, 0.0, 1.0), (0.0, 0.0, 2.0))
+    detector, shown = EventDetector(), []
+    for s in _series(offsets):
+        shown.append(tuple(e.kind for e in detector.update(s)))
+    events = detector.finish()
+    assert [e.kind for e in events] == ["lane_departure", "lane_change_right", "lane_departure"]
+    before, change, after = events
+    assert 0.7 < before.start_s < 0.9 and before.end_frame + 1 == change.start_frame
+    assert change.start_s == pytest.approx(jump / FPS - 3.0, abs=0.05)
+    assert change.end_s == pytest.approx(jump / FPS + 3.0, abs=0.05)
+    assert after.start_frame == change.end_frame + 1 and 17.3 < after.end_s < 17.5
+    assert (before.worst, change.worst, after.worst) == pytest.approx((1.2, 1.2, 1.3), abs=0.01)
+    assert shown[jump - 1] == ("lane_departure",) and shown[jump] == ("lane_change_right",)
+    assert shown[jump + round(3.5 * FPS)] == ("lane_departure",)
+    # Changed and settled soon: the one change, from where the wheel went over.
+    quick = _ramp((0.0, 1.2, 1.0), (1.2, 1.2, 1.0)) + _ramp((-1.3, 0.0, 1.0), (0.0, 0.0, 2.0))
+    (e,) = find_events(_series(quick))
+    assert e.kind == "lane_change_right" and 0.7 < e.start_s < 0.9 and 2.3 < e.end_s < 2.8
+
+
 def test_lane_lost_for_long_ends_an_excursion_where_it_was_last_seen() -> None:
     offsets: list[float | None] = [*_ramp((0.0, 1.2, 1.0), (1.2, 1.2, 1.0)), *[None] * 100]
     (e,) = find_events(_series(offsets))
@@ -216,3 +244,31 @@ def test_no_events_on_the_shared_clips(data_dir: Path, tmp_path: Path) -> None:
     done = run_cli("process", str(video), "-o", str(tmp_path / "o.mp4"), "--events", str(events))
     assert done.returncode == 0, done.stderr
     assert events.read_text() == "" and "events: none" in done.stdout
+
+
+@pytest.mark.slow
+def test_the_night_clips_car_on_the_centre_line_departs_changes_and_departs(
+    wild_dir: Path, tmp_path: Path
+) -> None:
+    """The wild night clip's car drives on the centre line for most of 18 s, crossing it at
+    10.3 s (the offset jumps from 1.46 m right of one lane's centre to 1.35 m left of the
+    next's): a departure over the double line, a change right of at most 3 s either side of
+    the crossing, and a departure astride the dashed line after it, not one change of 16 s."""
+    events = tmp_path / "events.jsonl"
+    video = wild_dir / "night_highway_istock.mp4"
+    options = ("--calibration", "none", "--no-vehicles", "--events", str(events))
+    records = {r["frame"]: r for r in process_clip(video, tmp_path, *options)}
+    found = [event_from_record(json.loads(line)) for line in events.read_text().splitlines()]
+    assert [e.kind for e in found] == ["lane_departure", "lane_change_right", "lane_departure"]
+    before, change, after = found
+    offsets = [
+        (k, records[k]["lane"]["offset_m"])
+        for k in range(change.start_frame, change.end_frame + 1)
+        if records[k]["lane"] is not None
+    ]
+    jumps = [k for (_, a), (k, b) in pairwise(offsets) if a > 1.0 and b < -1.0]
+    assert len(jumps) == 1
+    jump_s = records[jumps[0]]["time_s"]
+    assert jump_s - 3.0 <= change.start_s and change.end_s <= jump_s + 3.0
+    assert before.start_s < change.start_s - 3.0 and after.end_s > change.end_s + 3.0
+    assert before.end_frame < change.start_frame and after.start_frame > change.end_frame
