@@ -10,10 +10,11 @@ DATA := data
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
+# The versions the README's figures were measured with (constraints.txt), for figures that repeat.
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev]'
 	touch $(STAMP)
 
 data: $(STAMP)
