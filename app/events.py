@@ -192,7 +192,6 @@ class _Excursion:
         self._last: FrameSignals | None = None  # the last frame with a lane
         self._came_back: FrameSignals | None = None  # first frame of the current run inside
         self._side = 0.0  # +1 over the right boundary, -1 over the left
-        self._worst = 0.0  # the largest |offset| before a change
         # The excursion's frames with a lane over the last change_lead_s, each with the
         # |offset| it counts to the worst (none once changed); the last frame dropped from
         # them, and the worst of those dropped: where a change before the jump may start.
@@ -215,8 +214,13 @@ class _Excursion:
         self.reset()
         self._start = self._last = s
         self._side = math.copysign(1.0, s.offset_m)
-        self._worst = self._dropped_worst = abs(s.offset_m)
+        self._dropped_worst = abs(s.offset_m)
         self._recent.append((s, abs(s.offset_m)))
+
+    @property
+    def _worst(self) -> float:
+        """The largest |offset| of the frames over the line so far (none after a change)."""
+        return max(self._dropped_worst, max((w for _, w in self._recent), default=0.0))
 
     def _limit(self, s: FrameSignals) -> float:
         """The |offset| at which a wheel touches a boundary (lane widths kept to 2.5-5 m)."""
@@ -322,8 +326,6 @@ class _Excursion:
                 return ended
         else:
             self._came_back = None
-            if self._jump is None:
-                self._worst = max(self._worst, abs(s.offset_m))
         return ()
 
     def finish(self) -> tuple[Event, ...]:
