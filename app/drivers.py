@@ -103,18 +103,26 @@ def facing_note(stated: bool | None, seen: bool | None) -> str | None:
     )
 
 
-# What read a turn: the vehicles' rear edges, or the lane lines' spacing (`camera_cal.level`).
-LEANS_CUE = "the vehicles' rear edges lean so, as a camera mounted askew turns them"
-LINES_CUE = "the lane lines are spaced so, as a camera mounted askew spreads them to one side"
+# What read a turn, by `camera_cal.RollReading.cue`: the vehicles' rear edges, the lane lines'
+# spacing, or the road's motion on either side (with one vehicle's rear edges, or alone).
+TURN_CUES = {
+    "leans": "the vehicles' rear edges lean so, as a camera mounted askew turns them",
+    "lines": "the lane lines are spaced so, as a camera mounted askew spreads them to one side",
+    "vehicle and road": (
+        "a vehicle's rear edges lean so, and the road moves faster on the side turned up, as "
+        "a camera mounted askew shows it"
+    ),
+    "road": "the road moves faster on the side turned up, as a camera mounted askew shows it",
+}
 
 
-def levelled_note(roll_deg: float, frame: int, fps: float, by_lines: bool = False) -> str:
-    """What to tell of a picture levelled by a turn its vehicles' rear edges read, or (`by_lines`)
-    its lane lines' spacing (see `camera_cal.level`), from `frame` of a video at `fps` on."""
+def levelled_note(roll_deg: float, frame: int, fps: float, cue: str = "leans") -> str:
+    """What to tell of a picture levelled by a turn that `cue` read (a key of `TURN_CUES`),
+    from `frame` of a video at `fps` on."""
     way = "anticlockwise" if roll_deg > 0 else "clockwise"
     return (
         f"its picture is turned {abs(roll_deg):.1f} degrees {way} "
-        f"({LINES_CUE if by_lines else LEANS_CUE}): levelled from {frame / fps:.1f} s on "
+        f"({TURN_CUES[cue]}): levelled from {frame / fps:.1f} s on "
         f"(the output and the record with it); pass --roll {roll_deg:g} to level it from the "
         "start, or --roll 0 to leave it as it is"
     )
@@ -459,7 +467,7 @@ def process_video(
             log(f"note: {source.name} is {facing}")
         if pipeline.levelled is not None:
             turn, frame = pipeline.levelled  # levelled in the lead-in: from the start
-            said = levelled_note(turn, max(frame, first), info.fps, pipeline.levelled_by_lines)
+            said = levelled_note(turn, max(frame, first), info.fps, pipeline.levelled_by)
             log(f"note: {source.name}: {said}")
         if pipeline.roll_contradicted is not None:
             said = roll_contradicted_note(mounting.roll_deg or 0.0, pipeline.roll_contradicted)

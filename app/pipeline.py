@@ -158,9 +158,10 @@ class Pipeline:
     same camera goes on (see `_scene_after_cut`); the vehicle ids go on counting, and the
     driving events under way end at the cut.
 
-    A picture whose turn the user did not state is read for one from its vehicles' rear edges
-    and its lane lines' spacing (`camera_cal.RollReading`); once they agree on a turn, the
-    frames are levelled by it from the next one started (`levelled`). A stated turn stands;
+    A picture whose turn the user did not state is read for one from its vehicles' rear edges,
+    its lane lines' spacing and its road's motion on either side (the lane stage's, asked for
+    while the turn is read; `camera_cal.RollReading`); once they agree on a turn, the frames
+    are levelled by it from the next one started (`levelled`). A stated turn stands;
     where the picture still reads turned after it, the turn it implies is kept for a note
     (`roll_contradicted`). The stages and the scene go on with their history, which the turn
     moves by a few pixels: started over, as at a cut, the turned shared clips lost more frames
@@ -218,12 +219,13 @@ class Pipeline:
         self.frames_from: Callable[[int], Generator[Frame, None, None]] | None = None
         self._horizon_found = False  # the footage showed its horizon in some frame
         self._roll = 0.0  # the turn the frames are levelled by
-        # The edges' lean and the lane lines' spacing, read until the turn is known.
+        # The edges' lean, the lane lines' spacing and the road's motion on either side, read
+        # until the turn is known.
         self._level: RollReading | None = None
         # The turn read off the footage and the frame from which it was levelled, if any, and
-        # whether the lane lines read it (else the vehicles' rear edges).
+        # what read it (`RollReading.cue`).
         self.levelled: tuple[float, int] | None = None
-        self.levelled_by_lines = False
+        self.levelled_by = "leans"
         # The turn the picture reads where the user stated another (None: they agree, or too
         # few edges and lines to tell).
         self.roll_contradicted: float | None = None
@@ -255,7 +257,7 @@ class Pipeline:
         # A still has too few vehicles to read a turn from.
         self._level = RollReading() if fps > 0 else None
         self.levelled, self.roll_contradicted = None, None
-        self.levelled_by_lines = False
+        self.levelled_by = "leans"
         self.size = size
         # The lane stage's own warp for this size (built once), or the default one without it.
         view = self.lanes.view(size) if self.lanes is not None else birdseye_for(size, LaneConfig())
@@ -534,6 +536,7 @@ class Pipeline:
                 vehicles=around,
                 width_known=self._scene.lane_width_known,
                 road_x=scene.vanishing_x,
+                read_turn=self._level is not None and self._level.wants_road,
             )
             timings["lanes"] = (time.perf_counter() - t0) * 1000
         view = self._view(placement)
@@ -598,10 +601,16 @@ class Pipeline:
         return self._measured_view[1]
 
     def _read_roll(
-        self, undistorted: Frame, detections: Detections, index: int, scene: SceneGeometry
+        self,
+        undistorted: Frame,
+        detections: Detections,
+        index: int,
+        scene: SceneGeometry,
+        road_turn: float | None = None,
     ) -> None:
-        """Take in the leans of the tracked vehicles of the frame started as `index`, and its
-        lane lines along the rays from the `scene`'s vanishing point once it is measured; once
+        """Take in the leans of the tracked vehicles of the frame started as `index`, its
+        lane lines along the rays from the `scene`'s vanishing point once it is measured, and
+        the turn its road's advance on either side read (`road_turn`, the lane stage's); once
         they read a turn, level the frames by it from the next one started, or, where the user
         stated the turn, keep the one they imply for a note (once: the reading then stops)."""
         if self._level is None:
@@ -611,13 +620,18 @@ class Pipeline:
         if scene.estimated and scene.vanishing_x is not None:
             vanishing = (scene.vanishing_x, scene.horizon_y)
         turn = self._level.update(
-            undistorted, detections.boxes[tracked], detections.ids[tracked], vanishing, scene.live
+            undistorted,
+            detections.boxes[tracked],
+            detections.ids[tracked],
+            vanishing,
+            scene.live,
+            road_turn,
         )
         if turn is None:
             if self._level.full:  # level, or leaning every which way: read no more
                 self._level = None
             return
-        self.levelled_by_lines = self._level.by_lines
+        self.levelled_by = self._level.cue or "leans"
         self._level = None
         if self.mounting.roll_deg is not None:
             self.roll_contradicted = round(self._roll + turn, 1)
@@ -676,7 +690,10 @@ class Pipeline:
         if vehicles is not None:
             vehicles = self._numbered(vehicles)
             self._vehicle_boxes.append((started.index, vehicles.detections.boxes))
-            self._read_roll(undistorted, vehicles.detections, started.index, started.scene)
+            road_turn = lane.road_turn_deg if lane is not None else None
+            self._read_roll(
+                undistorted, vehicles.detections, started.index, started.scene, road_turn
+            )
         facts = None
         current = started.view
         if (

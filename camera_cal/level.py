@@ -87,6 +87,30 @@ class LatticeConfig:
 
 
 @dataclass(frozen=True)
+class RoadTurnConfig:
+    """When the turns the road's motion reads (the lane stage's advance on either side of its
+    view, one a frame) say the picture is turned (`RollReading`).
+
+    The last `keep` are kept, read for the first `frames` frames at most (each costs the lane
+    stage two more correlations). They are taken once `least` are in, their quartiles within
+    `spread_deg` of each other. They
+    stand in for the second vehicle where one vehicle's leans read a turn and their median, a
+    turn too (`LevelConfig.min_roll_deg` or more off level, the same way), is within
+    `LevelConfig.max_spread_deg` of it; alone, where no vehicle gave `LevelConfig.least`
+    leans and their median is `alone_deg` or more off level. A frame's reading leans on the
+    road's surface either side being as flat and as textured as the lane's: a verge or a
+    shoulder of another texture scatters them (the wild clips' rural road, India, US winter:
+    quartiles 5-16 degrees apart). Measured (README): the shared clips level read -0.3 to 0.7,
+    turned 3 degrees 2.6-3.8 and -2.1 to -3.1; the challenge clips -0.9 to -1.5."""
+
+    least: int = 50
+    spread_deg: float = 1.0
+    alone_deg: float = 2.0
+    keep: int = 200
+    frames: int = 500
+
+
+@dataclass(frozen=True)
 class LevelConfig:
     """How a box's edges give a lean, and when the leans of many say the picture is turned.
 
@@ -119,6 +143,7 @@ class LevelConfig:
     max_spread_deg: float = 1.5
     vehicles: int = 2
     vehicle_leans: int = 5
+    road: RoadTurnConfig = field(default_factory=RoadTurnConfig)
     lattice: LatticeConfig = field(default_factory=LatticeConfig)
 
 
@@ -380,6 +405,8 @@ class RollReading:
         self.config = config if config is not None else LevelConfig()
         self._leans: deque[tuple[int, float]] = deque(maxlen=keep)
         self.lattice = LaneLattice(self.config.lattice)
+        self._road: deque[float] = deque(maxlen=self.config.road.keep)  # the road's turns
+        self._frames = 0  # frames taken in
 
     def update(
         self,
@@ -388,12 +415,14 @@ class RollReading:
         ids: NDArray[np.int_],
         vanishing: tuple[float, float] | None = None,
         live: Box | None = None,
+        road_turn: float | None = None,
     ) -> float | None:
         """Take in one frame's vehicle boxes ((n, 4) x0, y0, x1, y1, wholly inside the
         picture) and their track ids, and, given the road's `vanishing` point (x, y), its lane
-        lines inside the `live` box (None: the whole picture); the turn read so far (see
-        `roll_deg`). Once as many leans are in as it keeps, no more are read (as many as found
-        no turn say the picture is level), nor lines after `LatticeConfig.frames` frames."""
+        lines inside the `live` box (None: the whole picture), and the turn the road's motion
+        read in it (`road_turn`, see `RoadTurnConfig`); the turn read so far (see `roll_deg`).
+        Once as many leans are in as it keeps, no more are read (as many as found no turn say
+        the picture is level), nor lines after `LatticeConfig.frames` frames."""
         h, w = rgb.shape[:2]
         if not self._leans_full:
             for (x0, y0, x1, y1), vehicle in zip(
@@ -406,7 +435,17 @@ class RollReading:
                     self._leans.append((int(vehicle), lean))
         if vanishing is not None and not self.lattice.done:
             self.lattice.update(rgb, vanishing, live if live is not None else (0, 0, w, h))
+        self._frames += 1
+        if road_turn is not None:
+            self._road.append(road_turn)
         return self.roll_deg
+
+    @property
+    def wants_road(self) -> bool:
+        """Whether it takes more of the road's turns (`RoadTurnConfig.keep`, for the first
+        `RoadTurnConfig.frames` frames)."""
+        road = self.config.road
+        return len(self._road) < road.keep and self._frames < road.frames
 
     @property
     def _leans_full(self) -> bool:
@@ -428,17 +467,47 @@ class RollReading:
     def roll_deg(self) -> float | None:
         """The picture's turn in degrees anticlockwise (the `--roll` that levels it), rounded
         to a tenth; None while too few leans are in, they disagree, or they say level, and the
-        lane lines read none (or the leans say level: lanes of unequal width read as a turn).
-        `by_lines` tells which read it."""
+        lane lines read none (or the leans say level: lanes of unequal width read as a turn),
+        nor the road's motion (`_road_turn`). `cue` tells which read it."""
         leans = self._leans_turn()
         if leans is not None:
             return None if leans == 0.0 else leans
-        return self._lines_turn()
+        lines = self._lines_turn()
+        return lines if lines is not None else self._road_turn()
 
     @property
-    def by_lines(self) -> bool:
-        """Whether the turn `roll_deg` reads is the lane lines' (the leans say nothing)."""
-        return self._leans_turn() is None and self._lines_turn() is not None
+    def cue(self) -> str | None:
+        """What read the turn `roll_deg` reads: "leans" (the vehicles'), "lines" (the lane
+        lines' spacing), "vehicle and road" (one vehicle's leans, the road's motion agreeing),
+        "road" (the road's motion alone); None while it reads none."""
+        if self._leans_turn() is not None:
+            return "leans" if self._leans_turn() != 0.0 else None
+        if self._lines_turn() is not None:
+            return "lines"
+        if self._road_turn() is None:
+            return None
+        return "road" if len(self._leans) < self.config.least else "vehicle and road"
+
+    def _road_turn(self) -> float | None:
+        """The turn one vehicle's leans read where the road's motion agrees, or the road's
+        alone where no vehicle was read (see `RoadTurnConfig`), rounded to a tenth."""
+        c, r = self.config, self.config.road
+        if len(self._road) < r.least:
+            return None
+        q1, road, q3 = np.quantile(np.fromiter(self._road, np.float64), [0.25, 0.5, 0.75])
+        if q3 - q1 > r.spread_deg or abs(road) > c.max_roll_deg:
+            return None
+        if len(self._leans) < c.least:
+            return round(float(road), 1) if abs(road) >= r.alone_deg else None
+        leans = np.array([lean for _, lean in self._leans])
+        l1, lean, l3 = np.quantile(leans, [0.25, 0.5, 0.75])
+        if l3 - l1 > c.max_spread_deg or abs(lean) < c.min_roll_deg:
+            return None
+        # The road must read the picture turned too, and the same way: one vehicle leaning
+        # 1.6 degrees on its own (a wider lens bows a car's edges off the middle) is within
+        # 1.5 of a level road's 0.5.
+        agree = abs(road) >= c.min_roll_deg and road * lean > 0
+        return round(float(lean), 1) if agree and abs(lean - road) <= c.max_spread_deg else None
 
     def _lines_turn(self) -> float | None:
         """The turn the lane lines read, rounded to a tenth, where it is one to level by."""

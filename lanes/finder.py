@@ -18,7 +18,7 @@ from lanes.measure import (
     lane_figures,
     lane_widths,
 )
-from lanes.motion import RoadMotion
+from lanes.motion import RoadMotion, SideMotion, turn_from_advances
 from lanes.perspective import BirdsEye, birdseye_for
 from lanes.search import (
     Fit,
@@ -96,6 +96,9 @@ class LaneResult:
     # The spacings of the dashes along this frame's dashed lines, in the view's metres (see
     # lanes/dashes.py): a lens other than the one the view assumes reads them longer or shorter.
     dash_spacings: tuple[float, ...] = ()
+    # The turn of the picture (degrees anticlockwise) that the road's advance on the view's
+    # two sides read this frame (`lanes.motion.turn_from_advances`), where it was asked for.
+    road_turn_deg: float | None = None
 
 
 class LaneFinder:
@@ -107,6 +110,7 @@ class LaneFinder:
         self.fps = 0.0  # the video's frame rate; 0: the one the config's counts are for
         self.left, self.right, self.motion = self._fresh_history()
         self.dashes = self._fresh_dashes()
+        self.sides: SideMotion | None = None  # the two sides' motion, while a turn is read
         self._view: BirdsEye | None = None
 
     def _fresh_lines(self) -> tuple[Line, Line]:
@@ -129,6 +133,7 @@ class LaneFinder:
             self.fps = fps
         self.left, self.right, self.motion = self._fresh_history()
         self.dashes = self._fresh_dashes()
+        self.sides = None
 
     def view(
         self,
@@ -162,6 +167,8 @@ class LaneFinder:
             self.left, self.right = self._fresh_lines()
             self.dashes = self._fresh_dashes()  # placed in the old view's metres
             self.motion.new_view()
+            if self.sides is not None:
+                self.sides.new_view()
         return self._view
 
     @property
@@ -181,6 +188,7 @@ class LaneFinder:
         vehicles: NDArray[np.float64] | None = None,
         width_known: bool = True,
         road_x: float | None = None,
+        read_turn: bool = False,
     ) -> LaneResult:
         """Find the lane in one undistorted RGB frame and update the history (the warp placed
         from the scene's `horizon_y`, `live` box, `scale_height`, `vanishing_x` and
@@ -193,7 +201,9 @@ class LaneFinder:
         the captions' boxes lost the night clip's lane in 3 % of its frames).
         `road_x` is the column of the road's vanishing point as the scene reads it now (the
         view is placed by it only in steps): the camera's place in the lane is read along the
-        road it gives; None: along the view's upright."""
+        road it gives; None: along the view's upright. With `read_turn` the road's motion is
+        read on the view's two sides too, for the turn it implies (`LaneResult.road_turn_deg`;
+        it costs a few milliseconds a frame, so only while a picture's turn is being read)."""
         cfg = self.config
         view = self.view(
             (frame.shape[1], frame.shape[0]),
@@ -205,9 +215,11 @@ class LaneFinder:
         )
         bw = view.size[0]
         birdseye = view.warp(frame)
-        advance = self.motion.update(
-            birdseye, view.ym_per_px, self._still(view, vehicles, overlays)
-        )
+        still = self._still(view, vehicles, overlays)
+        advance = self.motion.update(birdseye, view.ym_per_px, still)
+        road_turn = self._road_turn(birdseye, view, still) if read_turn else None
+        if not read_turn:
+            self.sides = None
         lab = lab_picture(birdseye)
         mask = lane_mask(birdseye, cfg, view.xm_per_px, view.ym_per_px, lab)
         paint = Paint.of(mask)
@@ -232,7 +244,24 @@ class LaneFinder:
                 bars = crossing_bars(lab[:, :, 0], cfg, view.xm_per_px, view.ym_per_px)
             debug = LaneDebug(birdseye, mask, pixels[0], pixels[1], bars)
         spacings = self._dash_spacings(paint.mask, lane, view, advance)
-        return LaneResult(lane, debug, status, advance, sample, believed, spacings)
+        return LaneResult(lane, debug, status, advance, sample, believed, spacings, road_turn)
+
+    def _road_turn(
+        self, birdseye: NDArray[np.uint8], view: BirdsEye, still: NDArray[np.bool_]
+    ) -> float | None:
+        """The turn the road's advance on the view's two sides reads this frame (see
+        `SideMotion`), or None until both sides' advances are measured."""
+        if self.sides is None:
+            self.sides = SideMotion(self.config.at_rate(self.fps).motion_smoothing)
+        advances = self.sides.update(birdseye, view.ym_per_px, still)
+        if advances is None:
+            return None
+        left, right = self.sides.columns(view.size[0])
+        slopes = (
+            view.ray_slope((left.start + left.stop) / 2),
+            view.ray_slope((right.start + right.stop) / 2),
+        )
+        return turn_from_advances(advances, slopes)
 
     def _lane_of(
         self,

@@ -182,3 +182,58 @@ class RoadMotion:
         if level > self.still_advance:
             measured = measured[np.abs(measured) >= self.pulled_share * level]
         return trimmed_mean(measured, 0.2)
+
+
+class SideMotion:
+    """History for the road's advance in the view's left and right `share` of its width (a
+    `RoadMotion` each): in a picture turned by a camera mounted askew, the view takes the road
+    on the side it turns up as further off than it lies, and that side's road moves faster in
+    the view (see `turn_from_advances`)."""
+
+    def __init__(self, smoothing: int = 15, share: float = 1 / 3) -> None:
+        self.share = share
+        self.left, self.right = RoadMotion(smoothing), RoadMotion(smoothing)
+
+    def new_view(self) -> None:
+        """Forget both sides' previous views (see `RoadMotion.new_view`)."""
+        self.left.new_view()
+        self.right.new_view()
+
+    def columns(self, width: int) -> tuple[slice, slice]:
+        """The view's columns of the left and right sides, for a view `width` wide."""
+        part = round(width * self.share)
+        return slice(0, part), slice(width - part, width)
+
+    def update(
+        self,
+        birdseye_rgb: NDArray[np.uint8],
+        ym_per_px: float,
+        hidden: NDArray[np.bool_] | None = None,
+    ) -> tuple[float, float] | None:
+        """The left and right sides' advances (metres a frame, smoothed), or None until both
+        are measured; `hidden` as in `RoadMotion.update`."""
+        advances = []
+        for side, cols in zip(
+            (self.left, self.right), self.columns(birdseye_rgb.shape[1]), strict=True
+        ):
+            part = np.ascontiguousarray(birdseye_rgb[:, cols])
+            advances.append(
+                side.update(part, ym_per_px, None if hidden is None else hidden[:, cols])
+            )
+        left, right = advances
+        return None if left is None or right is None else (left, right)
+
+
+def turn_from_advances(
+    advances: tuple[float, float], slopes: tuple[float, float], least: float = 0.05
+) -> float | None:
+    """The picture's turn in degrees anticlockwise (as `--roll` counts) that the road's
+    advances in the view at two columns read, the columns along rays from the vanishing point
+    with `slopes` t (sideways over down, in frame pixels). A road point at depth Z seen at t in
+    a picture turned by a lies on a row the view takes as depth Z (1 + t tan a): the view's
+    advance there is the car's times (1 + t tan a), whatever the camera's height, pitch or
+    lens. None where either side advances under `least` metres a frame (a standing road)."""
+    (left, right), (t_left, t_right) = advances, slopes
+    if min(left, right) < least:
+        return None
+    return float(np.degrees(np.arctan((right - left) / (left * t_right - right * t_left))))

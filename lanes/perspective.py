@@ -78,6 +78,12 @@ class BirdsEye:
         x, y, z = self.matrix @ np.array([0.0, 1.0, 0.0])
         return float(x / z), float(y / z)
 
+    def ray_slope(self, column: float) -> float:
+        """The t of the view's `column`: the sideways pixels per row below the horizon of the
+        ray from the view's vanishing point that the column shows (every column shows one)."""
+        (x0, y0), (x1, y1) = self.to_frame(np.array([[column, 0.0], [column, self.size[1]]]))
+        return float((x1 - x0) / (y1 - y0))
+
     def slant_to(self, column: float) -> float:
         """Columns a row by which road lines running to the vanishing point at frame `column`
         on the view's horizon slant in the view: 0 at the view's own (placed) column."""

@@ -3,11 +3,15 @@ made here; the shared clips turned and levelled are in test_process_cli."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 
 from camera_cal.level import LaneLattice, LevelConfig, RollReading, edge_lean
+from lanes.finder import LaneFinder
+from lanes.motion import turn_from_advances
 
 
 def _rear(turn_deg: float, seed: int = 0) -> np.ndarray:
@@ -156,15 +160,129 @@ def test_one_three_of_lines_or_lanes_of_unequal_width_read_no_turn() -> None:
 
 def test_the_vehicles_level_rears_outweigh_the_lines() -> None:
     """The lines' turn is taken where the vehicles say nothing; where their rears read level,
-    it is not (lanes of unequal width read as a turn); read off the lines, `by_lines` says so."""
+    it is not (lanes of unequal width read as a turn); read off the lines, `cue` says so."""
     box = np.array([[40.0, 50.0, 200.0, 190.0]])
     roads = [_road(FIVE_LANES, EDGES, -3.0, seed=seed) for seed in range(12)]
     none, no_ids = np.zeros((0, 4)), np.zeros(0, int)
     lines = RollReading()
     turns = [lines.update(road, none, no_ids, vanishing) for road, vanishing in roads]
-    assert turns[-1] is not None and abs(turns[-1] + 3.0) < 0.4 and lines.by_lines, turns
+    assert turns[-1] is not None and abs(turns[-1] + 3.0) < 0.4 and lines.cue == "lines", turns
     vetoed = RollReading()
     for seed in range(20):
         vetoed.update(_rear(0.0, seed), box, np.array([1 + seed % 2]))
     assert all(vetoed.update(road, none, no_ids, vanishing) is None for road, vanishing in roads)
     assert vetoed.lattice.turn_deg is not None
+
+
+def test_the_roads_advance_either_side_gives_the_turn() -> None:
+    """A road point seen at t (sideways over down from the vanishing point) in a picture
+    turned by a lies on a row the view takes as (1 + t tan a) times its depth: advances made
+    so read a back within a hundredth of a degree, from any pair of sides; a road standing
+    still reads none."""
+    for turn in (-4.0, 0.0, 2.5):
+        for slopes in ((-2.5, 2.5), (-1.0, 3.0)):
+            advances = tuple(1.2 * (1 + t * np.tan(np.radians(turn))) for t in slopes)
+            read = turn_from_advances((advances[0], advances[1]), slopes)
+            assert read is not None and abs(read - turn) < 0.01, (turn, slopes, read)
+    assert turn_from_advances((0.01, 0.012), (-2.5, 2.5)) is None
+
+
+def _turned_asphalt(turn_deg: float, frames: int = 30, step_m: float = 1.0) -> list[float]:
+    """A flat textured road streaming past a camera 1.2 m over it at `step_m` a frame (the
+    picture a pinhole camera of 1000 px sees at 1280x720, its horizon at row 400), turned
+    `turn_deg` anticlockwise about the picture's centre: the road turns the lane stage reads
+    off its advance either side (`read_turn`), frame by frame."""
+    size, horizon = (1280, 720), 400.0
+    rng = np.random.default_rng(0)
+    asphalt = cv2.GaussianBlur((rng.random((2000, 1000)) * 255).astype(np.uint8), (5, 5), 0)
+    asphalt = (asphalt // 4 + 80).astype(np.uint8)
+    ys, xs = np.mgrid[0 : size[1], 0 : size[0]].astype(np.float32)
+    below = np.maximum(ys - horizon, 1e-3)
+    ahead = 1000.0 * 1.2 / below  # metres ahead of each pixel's road point
+    aside = (xs - 640.0) * ahead / 1000.0
+    finder, turns = LaneFinder(), []
+    turn = cv2.getRotationMatrix2D(((size[0] - 1) / 2, (size[1] - 1) / 2), turn_deg, 1.0)
+    for k in range(frames):
+        # 10 texture pixels a metre; the texture's rows run away from the camera.
+        map_x = np.where(ys > horizon + 2, aside * 10 + 500, 0).astype(np.float32)
+        map_y = np.where(ys > horizon + 2, 1990 - (ahead + k * step_m) * 10, 0).astype(np.float32)
+        grey = cv2.remap(asphalt, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+        grey[ys <= horizon + 2] = 200
+        turned = cv2.warpAffine(np.dstack([grey] * 3), turn, size, borderMode=cv2.BORDER_REPLICATE)
+        read = finder.process(turned, horizon, read_turn=True).road_turn_deg
+        if read is not None:
+            turns.append(read)
+    return turns
+
+
+@pytest.mark.parametrize("turn", [-3.0, 0.0, 3.0])
+def test_a_turned_pictures_road_moves_faster_on_the_side_turned_up(turn: float) -> None:
+    """The synthetic road streaming past a turned camera reads its turn within half a degree
+    in most frames once both sides' advances are in; without `read_turn` none is read."""
+    turns = _turned_asphalt(turn)
+    assert len(turns) >= 20 and abs(np.median(turns) - turn) < 0.5, turns
+    assert np.mean(np.abs(np.asarray(turns) - turn) < 0.5) > 0.8, turns
+
+
+def test_the_roads_turn_stands_in_for_a_second_vehicle_or_alone_for_none() -> None:
+    """The road's turns, as the lane stage reads them a frame at a time: alone (no vehicle's
+    leans in), 50 that agree read the turn, 49 do not, nor do ones that scatter or stay near
+    level; with one vehicle's leans, the turn is the leans' where the road reads a turn too,
+    within 1.5 degrees of them, and none where it reads level or near it."""
+    rng = np.random.default_rng(0)
+    none, no_ids = np.zeros((0, 4)), np.zeros(0, int)
+    blank = np.zeros((120, 160, 3), np.uint8)
+
+    def fed(turns: np.ndarray, reading: RollReading | None = None) -> RollReading:
+        reading = reading if reading is not None else RollReading()
+        for turn in turns:
+            reading.update(blank, none, no_ids, road_turn=float(turn))
+        return reading
+
+    steady = 3.0 + rng.normal(0, 0.2, 50)
+    assert fed(steady[:49]).roll_deg is None
+    alone = fed(steady)
+    assert alone.roll_deg is not None and abs(alone.roll_deg - 3.0) < 0.2 and alone.cue == "road"
+    assert fed(3.0 + rng.normal(0, 2.0, 100)).roll_deg is None  # scattered
+    assert fed(1.2 + rng.normal(0, 0.2, 100)).roll_deg is None  # near level
+    box = np.array([[40.0, 50.0, 200.0, 190.0]])
+    # The road within 1.5 degrees of the leans but itself under 1.5 off level says level.
+    for road, read in ((3.6, True), (1.2, False), (-0.5, False)):
+        one = RollReading()
+        for k in range(30):  # one vehicle's leans: not the picture's on their own
+            one.update(_rear(2.5, k), box, np.array([1]))
+        assert one.roll_deg is None
+        fed(road + rng.normal(0, 0.2, 50), one)
+        if read:
+            assert one.roll_deg is not None and abs(one.roll_deg - 2.5) < 0.35, one.roll_deg
+            assert one.cue == "vehicle and road"
+        else:
+            assert one.roll_deg is None
+    # A vehicle's leans saying level outweigh the road.
+    level = RollReading()
+    for k in range(30):
+        level.update(_rear(0.0, k), box, np.array([1 + k % 2]))
+    assert fed(steady, level).roll_deg is None
+
+
+@pytest.mark.parametrize("turn", [-3.0, 0.0, 3.0])
+def test_the_shared_clips_road_reads_its_turn(data_dir: Path, turn: float) -> None:
+    """project_cut_2 undistorted and turned about its centre (its lane lines beyond the next
+    lane spread out of the picture, and it has one car ahead: neither the lines nor the leans
+    read 3 degrees anticlockwise): the road's turns that the lane stage reads over its frames
+    agree within a degree a frame (their quartiles), their median within 0.8 of the turn."""
+    from app.reframe import Framing, reframe_image
+    from app.sources import probe_video, read_frames
+    from camera_cal import build_undistorter, default_calibration_path, load_calibration
+
+    video = data_dir / "videos" / "project_cut_2.mp4"
+    info = probe_video(video)
+    undistort = build_undistorter(load_calibration(default_calibration_path()), info.size)
+    finder, turns = LaneFinder(), []
+    for frame in read_frames(video, info):
+        turned = reframe_image(undistort(frame), Framing("turned", roll=turn))
+        read = finder.process(turned, read_turn=True).road_turn_deg
+        if read is not None:
+            turns.append(read)
+    q1, median, q3 = np.quantile(turns, [0.25, 0.5, 0.75])
+    assert len(turns) >= 60 and q3 - q1 < 1.0 and abs(median - turn) < 0.8, (q1, median, q3)
