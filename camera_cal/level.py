@@ -469,24 +469,30 @@ class RollReading:
         to a tenth; None while too few leans are in, they disagree, or they say level, and the
         lane lines read none (or the leans say level: lanes of unequal width read as a turn),
         nor the road's motion (`_road_turn`). `cue` tells which read it."""
-        leans = self._leans_turn()
-        if leans is not None:
-            return None if leans == 0.0 else leans
-        lines = self._lines_turn()
-        return lines if lines is not None else self._road_turn()
+        reading = self._reading()
+        return None if reading is None else reading[0]
 
     @property
     def cue(self) -> str | None:
         """What read the turn `roll_deg` reads: "leans" (the vehicles'), "lines" (the lane
         lines' spacing), "vehicle and road" (one vehicle's leans, the road's motion agreeing),
         "road" (the road's motion alone); None while it reads none."""
-        if self._leans_turn() is not None:
-            return "leans" if self._leans_turn() != 0.0 else None
-        if self._lines_turn() is not None:
-            return "lines"
-        if self._road_turn() is None:
+        reading = self._reading()
+        return None if reading is None else reading[1]
+
+    def _reading(self) -> tuple[float, str] | None:
+        """The turn read so far and what read it (`roll_deg`, `cue`): the leans first (level
+        ones outweigh the rest), then the lines, then the road's motion."""
+        leans = self._leans_turn()
+        if leans is not None:
+            return None if leans == 0.0 else (leans, "leans")
+        lines = self._lines_turn()
+        if lines is not None:
+            return lines, "lines"
+        road = self._road_turn()
+        if road is None:
             return None
-        return "road" if len(self._leans) < self.config.least else "vehicle and road"
+        return road, "road" if len(self._leans) < self.config.least else "vehicle and road"
 
     def _road_turn(self) -> float | None:
         """The turn one vehicle's leans read where the road's motion agrees, or the road's
@@ -499,9 +505,8 @@ class RollReading:
             return None
         if len(self._leans) < c.least:
             return round(float(road), 1) if abs(road) >= r.alone_deg else None
-        leans = np.array([lean for _, lean in self._leans])
-        l1, lean, l3 = np.quantile(leans, [0.25, 0.5, 0.75])
-        if l3 - l1 > c.max_spread_deg or abs(lean) < c.min_roll_deg:
+        lean = self._leans_median()
+        if lean is None or abs(lean) < c.min_roll_deg:
             return None
         # The road must read the picture turned too, and the same way: one vehicle leaning
         # 1.6 degrees on its own (a wider lens bows a car's edges off the middle) is within
@@ -517,20 +522,30 @@ class RollReading:
             return None
         return round(turn, 1)
 
-    def _leans_turn(self) -> float | None:
-        """The turn the vehicles' leans read (0.0: level, their median under `min_roll_deg`
-        and close together), or None while they say nothing either way."""
+    def _leans_median(self) -> float | None:
+        """The leans' median once `least` are in, their quartiles within `max_spread_deg` of
+        each other and it within `max_roll_deg` of level; None otherwise. Leans that scatter (a
+        coarse picture's small cars) are not taken, however many: LA's level picture would
+        read a turn of 1.6 degrees (README)."""
         c = self.config
         if len(self._leans) < c.least:
             return None
-        ids, leans = (np.asarray(values) for values in zip(*self._leans, strict=True))
-        q1, median, q3 = np.quantile(leans, [0.25, 0.5, 0.75])
-        # Leans that scatter (a coarse picture's small cars) are not taken, however many: LA's
-        # level picture would read a turn of 1.6 degrees (README).
+        q1, median, q3 = np.quantile([lean for _, lean in self._leans], [0.25, 0.5, 0.75])
         if q3 - q1 > c.max_spread_deg or abs(median) > c.max_roll_deg:
+            return None
+        return float(median)
+
+    def _leans_turn(self) -> float | None:
+        """The turn the vehicles' leans read (0.0: level, their median under `min_roll_deg`
+        and close together), or None while they say nothing either way: a turn the vehicles
+        that gave `vehicle_leans` leans do not agree on (see `LevelConfig`) is none."""
+        c = self.config
+        median = self._leans_median()
+        if median is None:
             return None
         if abs(median) < c.min_roll_deg:
             return 0.0
+        ids, leans = (np.asarray(values) for values in zip(*self._leans, strict=True))
         own = [
             float(np.median(leans[ids == vehicle]))
             for vehicle in np.unique(ids)
