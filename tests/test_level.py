@@ -1,5 +1,7 @@
-"""The camera's roll read off the vehicles' rear edges (camera_cal/level.py), on synthetic rears
-made here; the shared clips turned and levelled are in test_process_cli."""
+"""The camera's roll read off the vehicles' rear edges, the lane lines' spacing and the road's
+motion either side (camera_cal/level.py, lanes/motion.py), on synthetic rears, roads and
+readings made here and on project_cut_2 turned; the shared clips turned and levelled end to end
+are in test_process_cli."""
 
 from __future__ import annotations
 
