@@ -95,15 +95,15 @@ class RoadTurnConfig:
     stage two more correlations, 4.3 ms a frame at 720p on the bench machine), and no more
     once `least` of them agree on level (under `LevelConfig.min_roll_deg`: no rule takes
     them). They are taken once `least` are in, their quartiles within `spread_deg` of each
-    other. They
-    stand in for the second vehicle where one vehicle's leans read a turn and their median, a
-    turn too (`LevelConfig.min_roll_deg` or more off level, the same way), is within
-    `LevelConfig.max_spread_deg` of it; alone, where no vehicle gave `LevelConfig.least`
-    leans and their median is `alone_deg` or more off level. A frame's reading leans on the
-    road's surface either side being as flat and as textured as the lane's: a verge or a
-    shoulder of another texture scatters them (the wild clips' rural road, India, US winter:
-    quartiles 5-16 degrees apart). Measured (README): the shared clips level read -0.3 to 0.7,
-    turned 3 degrees 2.6-3.8 and -2.1 to -3.1; the challenge clips -0.9 to -1.5."""
+    other. They stand in for the second vehicle where one vehicle's leans read a turn and
+    their median, a turn too (`LevelConfig.min_roll_deg` or more off level, the same way), is
+    within `LevelConfig.max_spread_deg` of it; alone, where no vehicle gave
+    `LevelConfig.least` leans and their median is `alone_deg` or more off level. A frame's
+    reading leans on the road's surface either side being as flat and as textured as the
+    lane's: a verge or a shoulder of another texture scatters them (the wild clips' rural
+    road, India, US winter: quartiles 5-16 degrees apart). Measured (README): the shared clips
+    level read -0.3 to 0.7, turned 3 degrees 2.6-3.8 and -2.1 to -3.1; the challenge clips
+    -0.9 to -1.5."""
 
     least: int = 50
     spread_deg: float = 1.0
