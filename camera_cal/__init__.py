@@ -10,6 +10,7 @@ from camera_cal.calibration import (
     find_board_corners,
     load_calibration,
     save_calibration,
+    turned,
 )
 from camera_cal.level import LevelConfig, RollReading
 from camera_cal.scene import (
@@ -58,5 +59,6 @@ __all__ = [
     "monochrome",
     "same_camera",
     "save_calibration",
+    "turned",
     "undistorter_for",
 ]

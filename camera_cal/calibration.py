@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from collections import Counter
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -46,6 +46,31 @@ class Calibration:
     coverage: float = 0.0
     images_used: tuple[str, ...] = field(default_factory=tuple)
     images_skipped: tuple[str, ...] = field(default_factory=tuple)
+
+
+def turned(calibration: Calibration, degrees: int) -> Calibration:
+    """The same lens for its pictures turned `degrees` (a multiple of 90) clockwise: a camera
+    mounted upside down (180) or a phone's video that lost its rotation tag (90, 270) is made
+    upright before undistortion, so its calibration turns with it. A quarter turn maps the
+    normalised point (x, y) to (-y, x): the focal lengths and the centre's coordinates swap
+    (the centre measured from the other side), the radial terms stay and the tangential ones
+    become (p2, -p1), the thin prism's (s1..s4) (-s3, -s4, s1, s2)."""
+    if degrees % 90 != 0:
+        raise ValueError(f"a calibration turns by quarter turns, not {degrees} degrees")
+    if np.any(np.asarray(calibration.dist_coeffs).ravel()[12:]):
+        raise ValueError("a tilted sensor's calibration (tau terms) cannot be turned")
+    matrix = np.array(calibration.camera_matrix, dtype=np.float64)
+    dist = np.array(calibration.dist_coeffs, dtype=np.float64).ravel()
+    width, height = calibration.image_size
+    for _ in range((degrees // 90) % 4):
+        fx, fy, cx, cy = matrix[0, 0], matrix[1, 1], matrix[0, 2], matrix[1, 2]
+        matrix = np.array([[fy, 0.0, height - 1 - cy], [0.0, fx, cx], [0.0, 0.0, 1.0]])
+        if dist.size >= 4:
+            dist[2], dist[3] = dist[3], -dist[2]
+        if dist.size >= 12:
+            dist[8:12] = -dist[10], -dist[11], dist[8], dist[9]
+        width, height = height, width
+    return replace(calibration, camera_matrix=matrix, dist_coeffs=dist, image_size=(width, height))
 
 
 def default_calibration_path() -> Path:

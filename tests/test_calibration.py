@@ -350,3 +350,33 @@ def test_a_video_without_a_board_is_refused(test_video: Path, tmp_path: Path) ->
     assert not out.exists()
     both = run_cli("calibrate", "--video", test_video, "--images", tmp_path, "--out", out)
     assert_one_line_error(both, "--images or --video")
+
+
+@pytest.mark.parametrize("degrees", [90, 180, 270])
+def test_a_calibration_turns_with_its_picture(degrees: int) -> None:
+    """A picture turned a quarter turn or two, undistorted with its calibration turned alike, is
+    the undistorted picture turned (a camera mounted upside down, a phone's video without its
+    tag): to the pixel, with the tangential and thin prism terms of a lens that has them. Four
+    quarter turns give the calibration back."""
+    from camera_cal import turned
+
+    size = (320, 200)
+    matrix = np.array([[300.0, 0, 171.3], [0, 290.0, 93.6], [0, 0, 1]])
+    dist = np.array([-0.25, 0.08, 0.004, -0.003, -0.02, 0, 0, 0, 0.002, -0.001, 0.003, 0.0005])
+    cal = Calibration(camera_matrix=matrix, dist_coeffs=dist, image_size=size)
+    rng = np.random.default_rng(1)
+    photo = cv2.GaussianBlur((rng.random((size[1], size[0], 3)) * 255).astype(np.uint8), (0, 0), 2)
+    quarters = -degrees // 90  # np.rot90 turns anticlockwise
+    expected = np.rot90(cv2.undistort(photo, matrix, dist), quarters)
+    turn = turned(cal, degrees)
+    got = cv2.undistort(np.ascontiguousarray(np.rot90(photo, quarters)), turn.camera_matrix,
+                        turn.dist_coeffs)  # fmt: skip
+    assert turn.image_size == (expected.shape[1], expected.shape[0])
+    difference = np.abs(got.astype(int) - expected.astype(int))[4:-4, 4:-4]
+    assert difference.max() <= 1
+    back = turned(turned(turn, 360 - degrees), 0)
+    np.testing.assert_allclose(back.camera_matrix, matrix)
+    np.testing.assert_allclose(back.dist_coeffs, dist)
+    assert back.image_size == size
+    with pytest.raises(ValueError):
+        turned(cal, 45)
