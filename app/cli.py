@@ -78,6 +78,18 @@ RollOption = Annotated[
     ),
 ]
 
+RotateOption = Annotated[
+    int,
+    typer.Option(
+        "--rotate",
+        metavar="DEG",
+        help="Turn the picture this many degrees clockwise to stand it upright: 180 for a "
+        "dashcam mounted upside down without its flip setting, 90 or 270 for a phone's video "
+        "that lost its rotation tag (decoding turns it, the calibration with it; --horizon "
+        "is a row of the upright picture).",
+    ),
+]
+
 # Video larger than 1080p is processed at 1080p: the stages read no more from more pixels (the
 # lanes keep a 720-row view, the vehicle bands are shrunk to their windows' model size) and 4K
 # would take decoding, undistortion and encoding four times as long (README: Speed at 1080p).
@@ -170,6 +182,7 @@ def _mounting(
     focal_length: float | None,
     calibration: str,
     dash_spacing: str | None = None,
+    rotate: int = 0,
 ) -> Mounting:
     """The `Mounting` the options state; a focal length beside a calibration file is refused
     (the calibration holds the lens's own)."""
@@ -187,6 +200,7 @@ def _mounting(
         _facing(facing),
         focal_length,
         _dash_spacing(dash_spacing),
+        rotate % 360,  # -90 is 270
     )
 
 
@@ -385,6 +399,7 @@ def process_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
+    rotate: RotateOption = 0,
     after: Annotated[
         Path | None,
         typer.Option(
@@ -404,7 +419,15 @@ def process_command(
 
     check_input(source)
     mounting = _mounting(
-        horizon, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
+        horizon,
+        camera_height,
+        traffic,
+        roll,
+        facing,
+        focal_length,
+        calibration,
+        dash_spacing,
+        rotate,
     )
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
@@ -483,6 +506,7 @@ def batch_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
+    rotate: RotateOption = 0,
     drives: Annotated[
         bool,
         typer.Option(
@@ -495,7 +519,15 @@ def batch_command(
     from app.batch import BatchOptions, find_inputs, in_drives, run_batch, summary_line
 
     mounting = _mounting(
-        None, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
+        None,
+        camera_height,
+        traffic,
+        roll,
+        facing,
+        focal_length,
+        calibration,
+        dash_spacing,
+        rotate,
     )
     check_mounting(mounting)
     entries = find_inputs(inputs)
@@ -539,6 +571,7 @@ def debug_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
+    rotate: RotateOption = 0,
     from_start: Annotated[
         bool,
         typer.Option(
@@ -574,7 +607,15 @@ def debug_command(
         cal,
         *stages,
         mounting=_mounting(
-            horizon, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing
+            horizon,
+            camera_height,
+            traffic,
+            roll,
+            facing,
+            focal_length,
+            calibration,
+            dash_spacing,
+            rotate,
         ),
     )
     written = run_debug(

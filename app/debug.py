@@ -28,6 +28,7 @@ from app.sources import (
     Frame,
     decoding_notes,
     probe_video,
+    turned_info,
     within_size,
 )
 from camera_cal import SceneGeometry
@@ -271,7 +272,7 @@ def run_debug(
     ground and length scales, the lines', the tracks') is the one `process` had there. A run
     from the clip's first frame goes on from `after`, the part of the drive before it, as
     `process --after` does (its last `LEAD_IN_S` run first)."""
-    info = within_size(probe_video(source), max_size)
+    info = within_size(turned_info(probe_video(source), pipeline.mounting.rotate_deg), max_size)
     for note in decoding_notes(info):
         log(f"note: {source.name}: {note}")
     pipeline.calibration, pipeline.mounting = camera_for(
@@ -285,7 +286,7 @@ def run_debug(
     start = 0 if from_start else max(0, first - round(WARMUP_S * info.fps))
     lead = None
     if after is not None and start == 0:
-        lead = lead_in(after, info, source, max_size, log)
+        lead = lead_in(after, info, source, max_size, log, pipeline.mounting.rotate_deg)
     elif after is not None:
         log(
             f"note: the run starts {start / info.fps:.1f} s into {source.name}, so {after.name} "

@@ -32,9 +32,11 @@ from app.sources import (
     probe_video,
     read_frames,
     read_image,
+    turned_image,
+    turned_info,
     within_size,
 )
-from camera_cal import Calibration, fits, monochrome
+from camera_cal import Calibration, fits, monochrome, turned
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
 
@@ -218,12 +220,19 @@ def lens_for(
     file's tag states (`tagged_mm`, a phone's) where the user stated none, the calibration that
     fits (`calibration_for`), and `log` told of a lens known without one (`lens_note`); where
     the lens is known (a calibration the user named, or a focal length), the lane dashes are
-    not read for the road's length (see `camera_cal.DashScale`)."""
+    not read for the road's length (see `camera_cal.DashScale`). A calibration turns with a
+    picture the mounting turns upright."""
+    if calibration is not None and mounting.rotate_deg:
+        # The calibration is of the picture as stored: it turns upright with it.
+        calibration = turned(calibration, mounting.rotate_deg)
     tagged = mounting.focal_mm is None and tagged_mm is not None
     if tagged:
         mounting = replace(mounting, focal_mm=tagged_mm)
     dropped = mounting.focal_mm is not None and calibration is not None and not required
-    calibration = calibration_for(calibration, size, name, required, log, mounting.focal_mm)
+    shown = name
+    if mounting.rotate_deg:
+        shown = f"{name} (turned {mounting.rotate_deg} degrees clockwise, the calibration with it)"
+    calibration = calibration_for(calibration, size, shown, required, log, mounting.focal_mm)
     # A calibration the user named sets the lens, whatever the tag says.
     if (lens := lens_note(mounting.focal_mm, tagged and calibration is None, dropped)) is not None:
         log(f"note: {name}: {lens}")
@@ -280,13 +289,18 @@ class LeadIn:
 
 
 def lead_in(
-    after: Path, info: VideoInfo, source: Path, max_size: int, log: Callable[[str], None]
+    after: Path,
+    info: VideoInfo,
+    source: Path,
+    max_size: int,
+    log: Callable[[str], None],
+    turn_deg: int = 0,
 ) -> LeadIn | None:
     """The lead-in of `source` from `after`, the part of the drive before it (its last
-    `LEAD_IN_S`), or None, said in `log`, where `after` cannot be read or is of another size
-    or frame rate (not the same camera's)."""
+    `LEAD_IN_S`), turned upright as `source` is (`turn_deg` clockwise), or None, said in `log`,
+    where `after` cannot be read or is of another size or frame rate (not the same camera's)."""
     try:
-        before = within_size(probe_video(after), max_size)
+        before = within_size(turned_info(probe_video(after), turn_deg), max_size)
     except InputError as error:
         log(f"note: {error}; it is not run first, {source.name} starts afresh")
         return None
@@ -381,7 +395,8 @@ def process_video(
     """
     warm_up = warm_up_opencv()
     try:
-        info = within_size(probe_video(source), max_size)
+        upright = (mounting or Mounting()).rotate_deg
+        info = within_size(turned_info(probe_video(source), upright), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
         calibration, mounting = camera_for(
             calibration, mounting or Mounting(), info, source.name, calibration_required, log
@@ -389,7 +404,7 @@ def process_video(
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
         focal_mm = recorded_focal_mm(calibration, mounting)
-        lead = None if after is None else lead_in(after, info, source, max_size, log)
+        lead = None if after is None else lead_in(after, info, source, max_size, log, upright)
     finally:
         # Before the fork in prepare() no thread may run, nor at exit inside OpenCV (abort).
         warm_up.join()
@@ -442,7 +457,7 @@ def process_video(
                 video.write(compose(out.undistorted, out.result, annotators))
             if records is not None:
                 records.write(
-                    frame_record(index, index / info.fps, info.size, out.result, focal_mm)
+                    frame_record(index, index / info.fps, info.size, out.result, focal_mm, upright)
                 )
             count += 1
             progress.update()
@@ -513,9 +528,10 @@ def process_still(
     A still whose aspect ratio is not the calibration's (another camera, or a crop) is processed
     without undistortion, and says so.
     """
-    image = read_image(source)
-    size = (image.shape[1], image.shape[0])
     mounting = mounting or Mounting()
+    check_mounting(mounting)
+    image = turned_image(read_image(source), mounting.rotate_deg)
+    size = (image.shape[1], image.shape[0])
     check_mounting(mounting, size)
     started = time.perf_counter()
     calibration, mounting = lens_for(
@@ -530,6 +546,13 @@ def process_still(
         )
         if record is not None:
             sinks.enter_context(RecordSink(record)).write(
-                frame_record(0, 0.0, size, out.result, recorded_focal_mm(calibration, mounting))
+                frame_record(
+                    0,
+                    0.0,
+                    size,
+                    out.result,
+                    recorded_focal_mm(calibration, mounting),
+                    mounting.rotate_deg,
+                )
             )
     return RunSummary(1, time.perf_counter() - started, output, record)

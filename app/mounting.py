@@ -2,7 +2,7 @@
 
 Each value takes the place of what the footage or the tuned camera would give; the CLI builds
 one `Mounting` from `--horizon`, `--camera-height`, `--traffic`, `--roll`, `--facing`,
-`--focal-length` and `--dash-spacing`, and the pipeline reads it (app/pipeline.py).
+`--focal-length`, `--dash-spacing` and `--rotate`, and the pipeline reads it (app/pipeline.py).
 """
 
 from __future__ import annotations
@@ -30,7 +30,10 @@ class Mounting:
     the lens's focal length in 35 mm terms (None: the shipped camera's; sets the distances of a
     camera without a calibration, see `camera_cal.undistort.focal_scale_height`), and the
     spacing of the lane dashes on the roads it films, in metres, from which the road's length
-    scale is read where the lens is not known (`camera_cal.DashScale`; None: not read)."""
+    scale is read where the lens is not known (`camera_cal.DashScale`; None: not read),
+    and the quarter turns, in degrees clockwise, that stand its picture upright as stored (a
+    camera mounted upside down: 180; a phone's video that lost its rotation tag: 90 or 270):
+    decoding turns the frames, and the calibration with them."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None
@@ -39,6 +42,7 @@ class Mounting:
     facing: str = "auto"
     focal_mm: float | None = None
     dash_spacing_m: float | None = US_DASH_SPACING_M
+    rotate_deg: int = 0
 
     @property
     def rear(self) -> bool | None:
@@ -162,6 +166,19 @@ def check_roll(roll_deg: float | None) -> None:
         )
 
 
+# The turns, clockwise, that stand a picture upright: the quarter turns.
+ROTATIONS = (0, 90, 180, 270)
+
+
+def check_rotate(rotate_deg: int) -> None:
+    """A user's rotation must be a quarter turn (a tilt is `--roll`'s)."""
+    if rotate_deg not in ROTATIONS:
+        raise InputError(
+            f"--rotate {rotate_deg} is not a quarter turn; pass 90, 180 or 270 (degrees "
+            "clockwise that stand the picture upright; a camera's tilt is --roll's)"
+        )
+
+
 # 35 mm-equivalent focal lengths a user may state, in mm: a fisheye's to a telephoto's (a
 # phone's main camera is 24-28, the shipped dashcam's 31).
 FOCAL_LENGTHS_MM = (8.0, 300.0)
@@ -212,6 +229,7 @@ def check_mounting(mounting: Mounting, size: tuple[int, int] | None = None) -> N
     check_facing(mounting.facing)
     check_focal_length(mounting.focal_mm)
     check_dash_spacing(mounting.dash_spacing_m)
+    check_rotate(mounting.rotate_deg)
 
 
 def video_mounting(mounting: Mounting, info: VideoInfo) -> Mounting:

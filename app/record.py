@@ -63,9 +63,11 @@ def frame_record(
     size: tuple[int, int],
     result: FrameResult,
     focal_mm: float | None = None,
+    rotate_deg: int = 0,
 ) -> dict[str, Any]:
     """The record object of one frame; `focal_mm` is the lens's focal length in 35 mm terms
-    where it, not a calibration, gave the distances (the frames are then as decoded)."""
+    where it, not a calibration, gave the distances (the frames are then as decoded);
+    `rotate_deg` the turn clockwise that stood the stored picture upright (`--rotate`)."""
     record: dict[str, Any] = {
         "frame": index,
         "time_s": round(time_s, 4),
@@ -74,6 +76,8 @@ def frame_record(
     }
     if focal_mm is not None:
         record["focal_mm"] = focal_mm
+    if rotate_deg:
+        record["rotate_deg"] = rotate_deg
     if result.roll_deg:
         record["roll_deg"] = round(result.roll_deg, 1)
     if result.scene is not None:

@@ -29,8 +29,8 @@ from app.events import (
     seen_from_behind,
 )
 from app.record import read_record_lines
-from app.sources import probe_video, read_frames, within_size
-from camera_cal import Calibration, Undistorter, fits, undistorter_for
+from app.sources import probe_video, read_frames, turned_info, within_size
+from camera_cal import Calibration, Undistorter, fits, turned, undistorter_for
 
 PLOT_W, PLOT_H = 860, 170
 MARGIN_L, MARGIN_R, MARGIN_T, MARGIN_B = 58, 12, 26, 26
@@ -343,6 +343,12 @@ def read_events(path: Path) -> list[Event]:
     return sorted(events, key=lambda e: (e.start_s, e.kind))
 
 
+def _record_rotation(row: Mapping[str, Any]) -> int:
+    """The quarter turn clockwise that stood a record's picture upright (0: none)."""
+    turn = row.get("rotate_deg", 0)
+    return int(turn) if turn in (90, 180, 270) else 0
+
+
 def _record_roll(row: Mapping[str, Any]) -> float:
     """The turn a record's frame was levelled by (0: none)."""
     turn = row.get("roll_deg", 0.0)
@@ -356,11 +362,14 @@ def event_thumbnails(
     calibration: Calibration | None,
     roll_deg: float | None = None,
 ) -> dict[int, str]:
-    """A thumbnail per event: the video's frame in the middle of the event, undistorted (not
-    where the record's lens is known by its focal length) and levelled by `roll_deg`, or by the
-    record's turn at that frame, as `process` did, with the involved vehicle's box from the
-    record."""
-    info = probe_video(video)
+    """A thumbnail per event: the video's frame in the middle of the event, turned upright as
+    the record says `process` turned it (`--rotate`), undistorted (not where the record's lens
+    is known by its focal length) and levelled by `roll_deg`, or by the record's turn at that
+    frame, as `process` did, with the involved vehicle's box from the record."""
+    rotate = _record_rotation(rows[0])
+    info = turned_info(probe_video(video), rotate)
+    if calibration is not None and rotate:
+        calibration = turned(calibration, rotate)
     size = tuple(rows[0].get("size", info.size))
     reduced = within_size(info, min(size))
     if tuple(info.size) != size and tuple(reduced.size) == size:

@@ -91,6 +91,31 @@ class VideoInfo:
     # Seconds of video the file states (its index or header); beyond `duration` where the
     # damage cut the frames short.
     stated_duration: float = 0.0
+    # Degrees clockwise that decoding turns the picture, after the tag, to stand it upright
+    # where the user says it is not (`turned_info`: a camera mounted upside down, a phone's
+    # video that lost its tag); `size` is the turned picture's.
+    turn_deg: int = 0
+
+
+# The ffmpeg filters that turn a picture so many degrees clockwise.
+TURN_FILTERS = {90: "transpose=clock", 180: "hflip,vflip", 270: "transpose=cclock"}
+
+
+def turned_info(info: VideoInfo, degrees: int) -> VideoInfo:
+    """`info` with its frames to be decoded turned `degrees` clockwise (0, 90, 180 or 270),
+    after any rotation tag and before `within_size`."""
+    degrees %= 360
+    if degrees == 0:
+        return info
+    width, height = info.size
+    size = (height, width) if degrees in (90, 270) else (width, height)
+    return replace(info, size=size, turn_deg=degrees)
+
+
+def turned_image(image: Frame, degrees: int) -> Frame:
+    """A still turned `degrees` clockwise (0, 90, 180 or 270), as `turned_info` turns video."""
+    quarters = (degrees % 360) // 90
+    return image if quarters == 0 else np.ascontiguousarray(np.rot90(image, -quarters))
 
 
 def within_size(info: VideoInfo, max_side: int) -> VideoInfo:
@@ -524,6 +549,9 @@ def _decode(path: Path, info: VideoInfo, seek_s: float | None) -> Generator[Fram
         filters.append("bwdif=mode=send_frame:deint=interlaced")
     if info.hdr is not None and can_tone_map():
         filters.append(SDR_TONE_MAP)
+    if info.turn_deg:
+        # Before any scaling, whose size is the turned picture's.
+        filters.append(TURN_FILTERS[info.turn_deg])
     if info.reduced_from is not None:
         # Shrunk by area averaging (after any square-pixel stretch: one scaling does both).
         filters.append(f"scale={width}:{height}:flags=area,setsar=1")

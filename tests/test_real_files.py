@@ -635,6 +635,16 @@ def test_records_follow_the_shipped_schema(
             "--json",
             tmp_path / "c.jsonl",
         ],
+        "turned still": [
+            "process",
+            data_dir / "test_images" / "test1.jpg",
+            "-o",
+            tmp_path / "d.png",
+            "--json",
+            tmp_path / "d.jsonl",
+            "--rotate",
+            "90",
+        ],
     }
     for name, args in runs.items():
         result = run_cli(*args)
@@ -656,6 +666,9 @@ def test_records_follow_the_shipped_schema(
     bad["vehicles"] = [{**bad["vehicles"][0], "box": [1, 2, 3]}]
     assert not validator.is_valid(bad)
     assert not validator.is_valid({**bad, "lane": {"curvature_m": 10000}})
+    (turned,) = read_record(tmp_path / "d.jsonl")
+    assert turned["rotate_deg"] == 90 and turned["size"] == [720, 1280]
+    assert not validator.is_valid({**turned, "rotate_deg": 45})
 
 
 def test_evaluate_refuses_a_record_that_does_not_cover_the_labels(

@@ -262,3 +262,28 @@ def test_thumbnails_of_a_video_processed_reduced(tmp_path: Path) -> None:
     other = [{**row, "size": [240, 180]} for row in rows]
     with pytest.raises(InputError, match="240x180"):
         event_thumbnails(video, other, [event], None)
+
+
+def test_thumbnails_of_a_picture_turned_upright(tmp_path: Path) -> None:
+    """A video `process --rotate 270` stood upright (stored on its side, as a phone's that lost
+    its tag) has a record of the upright frames and says the turn (`rotate_deg`): its
+    thumbnails are of the frames turned so, the record's box on the car; without the turn the
+    record's size is not the video's, and it is refused."""
+    from app.report import event_thumbnails
+
+    upright = np.full((360, 640, 3), 60, np.uint8)
+    upright[200:260, 300:400] = 255  # the car
+    stored = np.ascontiguousarray(np.rot90(upright, -1))  # turned clockwise: 360x640 stored
+    video = _still_video(tmp_path / "sideways.mp4", stored)
+    event = Event("closing_fast", 10, 20, 0.4, 0.8, 1, 2.0)
+    car = {"id": 1, "box": [300, 200, 400, 260], "score": 0.9}
+    rows = [{**row, "rotate_deg": 270, "vehicles": [car]} for row in _rows(30)]
+    (uri,) = event_thumbnails(video, rows, [event], None).values()
+    thumb = _thumbnail(uri, cv2.IMREAD_COLOR)
+    scale = thumb.shape[1] / 640
+    assert abs(thumb.shape[0] / scale - 360) < 2
+    white = (thumb.min(axis=2) > 200).nonzero()
+    assert abs(white[1].mean() / scale - 350) < 4 and abs(white[0].mean() / scale - 230) < 4
+    told_nothing = [{k: v for k, v in row.items() if k != "rotate_deg"} for row in rows]
+    with pytest.raises(InputError, match="360x640"):
+        event_thumbnails(video, told_nothing, [event], None)
