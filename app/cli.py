@@ -419,16 +419,9 @@ def process_command(
 
     check_input(source)
     mounting = _mounting(
-        horizon,
-        camera_height,
-        traffic,
-        roll,
-        facing,
-        focal_length,
-        calibration,
-        dash_spacing,
+        horizon, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing,
         rotate,
-    )
+    )  # fmt: skip
     max_size = _max_size(max_size)
     outputs = plan_outputs(source, output, record, lambda m: typer.echo(m, err=True), events)
     if after is not None:
@@ -519,16 +512,9 @@ def batch_command(
     from app.batch import BatchOptions, find_inputs, in_drives, run_batch, summary_line
 
     mounting = _mounting(
-        None,
-        camera_height,
-        traffic,
-        roll,
-        facing,
-        focal_length,
-        calibration,
-        dash_spacing,
+        None, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing,
         rotate,
-    )
+    )  # fmt: skip
     check_mounting(mounting)
     entries = find_inputs(inputs)
     if not entries:
@@ -603,21 +589,11 @@ def debug_command(
     check_debug_folder(folder, source)
     cal = _calibration(calibration)
     stages = build_stages(model=model, keep_debug=True, **_verifier(verifier))
-    pipeline = Pipeline(
-        cal,
-        *stages,
-        mounting=_mounting(
-            horizon,
-            camera_height,
-            traffic,
-            roll,
-            facing,
-            focal_length,
-            calibration,
-            dash_spacing,
-            rotate,
-        ),
-    )
+    mounting = _mounting(
+        horizon, camera_height, traffic, roll, facing, focal_length, calibration, dash_spacing,
+        rotate,
+    )  # fmt: skip
+    pipeline = Pipeline(cal, *stages, mounting=mounting)
     written = run_debug(
         source,
         span,
