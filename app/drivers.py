@@ -17,7 +17,7 @@ import numpy as np
 from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
-from app.mounting import Mounting, aim_note, check_mounting, video_mounting
+from app.mounting import Mounting, aim_note, check_mounting, check_rotate, video_mounting
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
@@ -395,11 +395,12 @@ def process_video(
     """
     warm_up = warm_up_opencv()
     try:
-        upright = (mounting or Mounting()).rotate_deg
+        mounting = mounting or Mounting()
+        upright = mounting.rotate_deg
         info = within_size(turned_info(probe_video(source), upright), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
         calibration, mounting = camera_for(
-            calibration, mounting or Mounting(), info, source.name, calibration_required, log
+            calibration, mounting, info, source.name, calibration_required, log
         )
         for note in decoding_notes(info):
             log(f"note: {source.name}: {note}")
@@ -529,7 +530,7 @@ def process_still(
     without undistortion, and says so.
     """
     mounting = mounting or Mounting()
-    check_mounting(mounting)
+    check_rotate(mounting.rotate_deg)
     image = turned_image(read_image(source), mounting.rotate_deg)
     size = (image.shape[1], image.shape[0])
     check_mounting(mounting, size)
