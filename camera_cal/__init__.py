@@ -1,5 +1,5 @@
 """Camera calibration from chessboard photos, per-frame undistortion, and the scene geometry
-(live picture and horizon) and the camera's roll read off the footage."""
+(live picture and horizon), the camera's roll and the picture's way up read off the footage."""
 
 from camera_cal.calibration import (
     Calibration,
@@ -32,8 +32,10 @@ from camera_cal.undistort import (
     focal_scale_height,
     undistorter_for,
 )
+from camera_cal.upright import SIDES, SkyVote, UprightConfig, sky_scores, sky_side, sky_vote
 
 __all__ = [
+    "SIDES",
     "US_DASH_SPACING_M",
     "Calibration",
     "CalibrationError",
@@ -45,7 +47,9 @@ __all__ = [
     "SceneGeometry",
     "SceneTracker",
     "ShotDetector",
+    "SkyVote",
     "Undistorter",
+    "UprightConfig",
     "build_undistorter",
     "calibrate",
     "calibrate_frames",
@@ -59,6 +63,9 @@ __all__ = [
     "monochrome",
     "same_camera",
     "save_calibration",
+    "sky_scores",
+    "sky_side",
+    "sky_vote",
     "turned",
     "undistorter_for",
 ]
