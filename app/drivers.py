@@ -17,7 +17,14 @@ import numpy as np
 from app.annotators import Annotator, compose
 from app.errors import InputError
 from app.events import Event, event_record
-from app.mounting import Mounting, aim_note, check_mounting, check_rotate, video_mounting
+from app.mounting import (
+    Mounting,
+    aim_note,
+    check_mounting,
+    check_rotate,
+    upright_note,
+    video_mounting,
+)
 from app.pipeline import Pipeline
 from app.progress import Progress
 from app.record import frame_record
@@ -36,7 +43,16 @@ from app.sources import (
     turned_info,
     within_size,
 )
-from camera_cal import Calibration, fits, monochrome, turned
+from camera_cal import (
+    Calibration,
+    UprightConfig,
+    fits,
+    monochrome,
+    sky_scores,
+    sky_side,
+    sky_vote,
+    turned,
+)
 from lanes.finder import LaneFinder
 from vehicles.detector import VehicleDetector
 
@@ -68,6 +84,10 @@ def frame_range(fps: float, n_frames: int, start_s: float, end_s: float | None) 
     if first >= n_frames:
         raise InputError(f"--start {start_s}s is past the end of the video ({n_frames / fps:.2f}s)")
     return first, last
+
+
+# How the sky's side is voted on over a video's frames (README, Which way up).
+SKY = UprightConfig()
 
 
 # Told when the road moves away from an unstated camera: it looks back (README, A rear camera).
@@ -440,6 +460,7 @@ def process_video(
         colourless, told_at = vehicles is not None, min(round(2 * info.fps), last - first) - 1
         scales: list[float] = []  # the lanes' ground scale at each frame
         aims: list[float] = []  # the vanishing point's column off the live middle, in widths
+        skies: list[int | None] = []  # the sky's side in every SKY.every-th frame
         for started_at, out in enumerate(pipeline.stream(decoded)):
             offset = started_at - led
             if offset < 0:
@@ -450,6 +471,11 @@ def process_video(
                 if scene.vanishing_x is not None:
                     x0, _, x1, _ = scene.live
                     aims.append((scene.vanishing_x - (x0 + x1) / 2) / max(1, x1 - x0))
+            if offset % SKY.every == 0:
+                h, w = out.undistorted.shape[:2]
+                live = (0, 0, w, h) if scene is None else scene.live
+                scores = sky_scores(out.undistorted, live, SKY.strip)
+                skies.append(sky_side(scores, SKY.margin))
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:
@@ -497,6 +523,9 @@ def process_video(
             log(f"note: {source.name}: {dashes}")
         if (aim := aim_note(float(np.median(aims)) if aims else None)) is not None:
             log(f"note: {source.name}: {aim}")
+        sky = upright_note(sky_vote(skies, SKY.least, SKY.min_votes), upright)
+        if sky is not None:
+            log(f"note: {source.name}: {sky}")
         events = within_part(tuple(pipeline.finish_events()), first, info.fps)
         if events_file is not None:
             event_sink = sinks.enter_context(RecordSink(events_file))

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 from app.errors import InputError
 from app.sources import VideoInfo, reduced_row
-from camera_cal import US_DASH_SPACING_M
+from camera_cal import SIDES, US_DASH_SPACING_M, SkyVote
 
 
 @dataclass(frozen=True)
@@ -177,6 +177,26 @@ def check_rotate(rotate_deg: int) -> None:
             f"--rotate {rotate_deg} is not a quarter turn; pass 90, 180 or 270 (degrees "
             "clockwise that stand the picture upright; a camera's tilt is --roll's)"
         )
+
+
+def upright_note(vote: SkyVote, told_deg: int) -> str | None:
+    """What a user should hear where the frames' sky lies on another side than the top
+    (`vote`, taken on the picture after the `told_deg` turn): the picture looks stored turned,
+    and the turn that stands it upright. Only told, never acted on: a dark skyline over a bright
+    road outvotes the sky in a few clips' frames (README, Which way up). None where the sky
+    voted for the top or did not hold the vote."""
+    side, turn = vote.side, vote.turn_deg
+    if side is None or turn is None or side == 0:
+        return None
+    total = (told_deg + turn) % 360
+    advice = f"pass --rotate {total}" if total else f"drop --rotate {told_deg}"
+    turned = f" after --rotate {told_deg}" if told_deg else ""
+    where = f"{'at' if side == 2 else 'on'} its {SIDES[side]}"
+    return (
+        f"it looks stored turned{turned}: its sky (the brightest, bluest side) lies {where} in "
+        f"{vote.votes[side]} of {sum(vote.votes)} frames sampled; if so, {advice} to stand it "
+        "upright (the lanes, vehicles and facts are read as if its top were up)"
+    )
 
 
 # 35 mm-equivalent focal lengths a user may state, in mm: a fisheye's to a telephoto's (a

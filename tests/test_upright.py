@@ -1,0 +1,160 @@
+"""Which way up a picture is, read off its sky: upright clips of every camera vote for the top,
+the same clips turned vote for the side their sky was turned to, and `process` says so."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from app.mounting import upright_note
+from app.sources import ffmpeg_binary, probe_video, read_frames
+from camera_cal.scene import live_box
+from camera_cal.upright import SkyVote, UprightConfig, sky_scores, sky_side, sky_vote
+from tests.helpers import read_record, run_cli
+
+CONFIG = UprightConfig()
+
+
+def _sampled(video: Path, limit: int = 500) -> tuple[list[np.ndarray], tuple[int, int, int, int]]:
+    """Every `CONFIG.every`-th of the first `limit` frames, and their live box (inside bars)."""
+    info = probe_video(video)
+    frames, row_max, col_max = [], None, None
+    for k, frame in enumerate(read_frames(video, info, 0, min(limit, info.n_frames))):
+        grey = frame.max(axis=2)
+        rows, cols = grey.max(axis=1), grey.max(axis=0)
+        row_max = rows if row_max is None else np.maximum(row_max, rows)
+        col_max = cols if col_max is None else np.maximum(col_max, cols)
+        if k % CONFIG.every == 0:
+            frames.append(frame)
+    assert row_max is not None and col_max is not None
+    return frames, live_box(row_max, col_max)
+
+
+def _turned_box(
+    box: tuple[int, int, int, int], size: tuple[int, int], quarters: int
+) -> tuple[int, int, int, int]:
+    """`box` of a picture of `size` (width, height) turned `quarters` quarter turns clockwise."""
+    for _ in range(quarters):
+        x0, y0, x1, y1 = box
+        w, h = size
+        box, size = (h - y1, x0, h - y0, x1), (h, w)
+    return box
+
+
+def _vote(frames: list[np.ndarray], live: tuple[int, int, int, int], quarters: int) -> SkyVote:
+    """The sky vote of `frames` turned `quarters` quarter turns clockwise."""
+    h, w = frames[0].shape[:2]
+    box = _turned_box(live, (w, h), quarters)
+    sides = [
+        sky_side(sky_scores(np.rot90(f, -quarters), box, CONFIG.strip), CONFIG.margin)
+        for f in frames
+    ]
+    return sky_vote(sides, CONFIG.least, CONFIG.min_votes)
+
+
+@pytest.mark.parametrize(
+    "clip",
+    [
+        "videos/project_cut_1.mp4",
+        "videos/project_cut_2.mp4",
+        "wild/india_highway_wildfilms.mp4",
+        "wild/la_freeway_minidashcam_2.mp4",
+        "wild/night_highway_istock.mp4",
+        "wild/rural_2lane_wet.mp4",
+        "wild/udacity_challenge_video_clipA_2.4s.mp4",
+        "wild/udacity_challenge_video_clipC_3.1s.mp4",
+        "wild/us_highway_winter.mp4",
+    ],
+)
+def test_the_sky_votes_for_the_side_a_clip_was_turned_to(
+    request: pytest.FixtureRequest, clip: str
+) -> None:
+    """Upright, each clip's frames vote for the top (the snowy verge, the night, the wet road
+    and the Indian haze too; clip A's dark skyline over a bright road outvotes the sky in a
+    few of its frames, not in most). Turned a quarter turn clockwise, half a turn and a quarter
+    anticlockwise, they vote for the right, the bottom and the left: the turn that stands them
+    upright is 270, 180 and 90."""
+    folder, name = clip.split("/")
+    root = request.getfixturevalue("wild_dir" if folder == "wild" else "data_dir")
+    video = root / name if folder == "wild" else root / clip
+    frames, live = _sampled(video)
+    upright = _vote(frames, live, 0)
+    assert upright.side == 0 and upright.turn_deg == 0, upright
+    for quarters, turn in ((1, 270), (2, 180), (3, 90)):
+        vote = _vote(frames, live, quarters)
+        assert vote.side == quarters and vote.turn_deg == turn, (quarters, vote)
+        assert vote.votes[quarters] == upright.votes[0], (quarters, vote, upright)
+
+
+def test_a_turned_still_permutes_the_side_scores(data_dir: Path) -> None:
+    """Each side's strip spans the same share of the picture across it, so a quarter turn
+    moves each side's score to the next side (within the rounding of every 2nd pixel)."""
+    still = cv2.cvtColor(
+        cv2.imread(str(data_dir / "test_images" / "straight_lines1.jpg")), cv2.COLOR_BGR2RGB
+    )
+    h, w = still.shape[:2]
+    scores = sky_scores(still, (0, 0, w, h))
+    assert int(np.argmax(scores)) == 0
+    for quarters in (1, 2, 3):
+        turned = np.ascontiguousarray(np.rot90(still, -quarters))
+        th, tw = turned.shape[:2]
+        np.testing.assert_allclose(
+            sky_scores(turned, (0, 0, tw, th)), np.roll(scores, quarters), atol=3
+        )
+
+
+def test_a_vote_needs_enough_frames_and_a_clear_majority() -> None:
+    """Unsure frames do not vote; under `min_votes` votes or `least` of them for one side there
+    is no verdict; a side's vote stands the picture upright by the turn that brings it up."""
+    assert sky_vote([1] * 10).side == 1 and sky_vote([1] * 10).turn_deg == 270
+    assert sky_vote([3] * 8 + [None] * 20 + [0] * 2).side == 3
+    assert sky_vote([1] * 9 + [None] * 20).side is None  # too few votes
+    assert sky_vote([0] * 7 + [2] * 3).side is None  # 70 %: split
+    assert sky_vote([]).turn_deg is None
+    assert sky_side(np.array([100.0, 80.0, 60.0, 50.0])) is None  # 20 ahead: unsure
+    assert sky_side(np.array([40.0, 80.0, 120.0, 50.0])) == 2
+
+
+def test_the_note_names_the_turn_that_stands_the_picture_upright() -> None:
+    """The note adds the sky's turn to what the user passed, and says nothing of an upright
+    picture or of a split vote."""
+    right, bottom, left = (SkyVote((0, 12, 0, 0), 1), SkyVote((0, 0, 12, 0), 2),
+                           SkyVote((0, 0, 0, 12), 3))  # fmt: skip
+    said = upright_note(right, 0)
+    assert said is not None and "on its right in 12 of 12" in said and "--rotate 270" in said
+    told = upright_note(bottom, 90)
+    assert told is not None and "after --rotate 90" in told and "pass --rotate 270" in told
+    undo = upright_note(right, 90)
+    assert undo is not None and "drop --rotate 90" in undo
+    again = upright_note(bottom, 270)
+    assert again is not None and "pass --rotate 90" in again
+    dropped = upright_note(left, 270)
+    assert dropped is not None and "drop --rotate 270" in dropped
+    assert upright_note(SkyVote((12, 0, 0, 0), 0), 0) is None
+    assert upright_note(SkyVote((6, 0, 6, 0), None), 0) is None
+
+
+def test_process_says_a_clip_stored_turned_looks_turned(data_dir: Path, tmp_path: Path) -> None:
+    """project_cut_1 stored a quarter anticlockwise (its sky on the left): `process` notes that
+    it looks turned and that --rotate 90 stands it upright, and still reads the picture as
+    stored (the note is never acted on); told --rotate 90 it says nothing of the sky."""
+    clip = tmp_path / "anticlockwise.mp4"
+    video = data_dir / "videos" / "project_cut_1.mp4"
+    command = [ffmpeg_binary(), "-loglevel", "error", "-i", str(video), "-vf",
+               "transpose=cclock", "-c:v", "libx264", "-crf", "18", str(clip)]  # fmt: skip
+    subprocess.run(command, check=True)
+    record = tmp_path / "r.jsonl"
+    common = ("--no-vehicles", "--calibration", "none", "--json", record, "-o", tmp_path / "o.mp4")
+    untold = run_cli("process", clip, *common)
+    assert untold.returncode == 0, untold.stderr
+    said = untold.stdout + untold.stderr
+    assert "looks stored turned" in said and "on its left" in said and "--rotate 90" in said
+    assert {tuple(r["size"]) for r in read_record(record)} == {(720, 1280)}
+    told = run_cli("process", clip, *common, "--rotate", "90")
+    assert told.returncode == 0, told.stderr
+    assert "looks stored turned" not in told.stdout + told.stderr
+    assert {tuple(r["size"]) for r in read_record(record)} == {(1280, 720)}
