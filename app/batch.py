@@ -76,6 +76,7 @@ class ManifestRow:
     processing_seconds: float
     worker: str
     notes: str = ""  # what `process` would have said of the input (one note a line)
+    settings: str = ""  # `settings_digest` of the run that made the outputs
 
 
 def find_inputs(items: Iterable[Path]) -> list[BatchInput]:
@@ -129,6 +130,21 @@ def fingerprint(path: Path, chunk: int = 1 << 20) -> str:
     return digest.hexdigest()
 
 
+def settings_digest(options: BatchOptions, entry: BatchInput) -> str:
+    """What an input's outputs hang on besides its own content: the options that change them
+    (the calibration's and the vehicle model's files by content, whether the calibration must
+    fit, the mounting, the size limit) and the part of a drive it goes on from. An input done
+    with other settings is done again rather than skipped."""
+    from vehicles.model import default_model_path
+
+    model = Path(options.model) if options.model else default_model_path()
+    calibration = Path(options.calibration) if options.calibration else None
+    parts = [repr(options.mounting), str(options.max_size), str(options.calibration_required)]
+    for path in (calibration, model, entry.after):
+        parts.append(f"{path}:{fingerprint(path)}" if path and path.is_file() else str(path))
+    return hashlib.blake2b("\n".join(parts).encode(), digest_size=16).hexdigest()
+
+
 def outputs_of(entry: BatchInput, out: Path) -> tuple[Path, Path]:
     """The annotated video and the record of one input, mirroring its relative path."""
     base = out / entry.relative
@@ -149,7 +165,9 @@ def _key(entry: BatchInput) -> str:
     return hashlib.blake2b(str(entry.relative).encode(), digest_size=8).hexdigest()
 
 
-def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str) -> ManifestRow:
+def process_one(
+    entry: BatchInput, options: BatchOptions, size: int, digest: str, settings: str = ""
+) -> ManifestRow:
     """Run one video (inside a Dask worker); a bad input becomes a failed row, never an error."""
     started = time.perf_counter()
     worker = f"{socket.gethostname()}:{os.getpid()}"
@@ -166,6 +184,7 @@ def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str
             time.perf_counter() - started,
             worker,
             "\n".join(notes),
+            settings,
         )
     except USER_ERRORS as error:
         message = describe(error)
@@ -181,6 +200,7 @@ def process_one(entry: BatchInput, options: BatchOptions, size: int, digest: str
         0.0,
         time.perf_counter() - started,
         worker,
+        settings=settings,
     )
 
 
@@ -443,18 +463,20 @@ def run_batch(
     earlier = read_manifest(table)
     manifest: dict[str, ManifestRow] = dict(earlier)
     started = time.perf_counter()
-    todo: list[tuple[BatchInput, int, str]] = []
+    todo: list[tuple[BatchInput, int, str, str]] = []
     skipped = 0
     for entry in entries:
         size = entry.path.stat().st_size if entry.path.exists() else 0
         digest = fingerprint(entry.path) if entry.path.is_file() else ""
         old = earlier.get(str(entry.path))
+        settings = settings_digest(options, entry)
         video, record = outputs_of(entry, options.out)
         if (
             not force
             and old is not None
             and old.status in ("done", "skipped")
             and old.fingerprint == digest
+            and old.settings == settings
             and record.exists()
             and (video.exists() or not options.video)
         ):
@@ -462,10 +484,10 @@ def run_batch(
             current_table_parts(table, _key(entry), str(entry.relative), record)
             skipped += 1
         else:
-            todo.append((entry, size, digest))
+            todo.append((entry, size, digest, settings))
     # Largest first: a long video started last would leave the other workers idle at the end.
     todo.sort(key=lambda item: -item[1])
-    progress = BatchProgress([size for _, size, _ in todo])
+    progress = BatchProgress([size for _, size, _, _ in todo])
     done = failed = frames = 0
     video_seconds = 0.0
     finished: set[str] = set()
@@ -482,10 +504,11 @@ def run_batch(
                     options,
                     size,
                     digest,
+                    settings,
                     key=f"video-{_key(entry)}",
                     pure=False,
                 )
-                for entry, size, digest in todo
+                for entry, size, digest, settings in todo
             ]
             try:
                 for future in as_completed(futures):
@@ -511,7 +534,7 @@ def run_batch(
         if manifest:
             write_manifest(table, manifest.values())
     if interrupted:
-        for entry, _, _ in todo:  # the cluster is closed: nothing writes these any more
+        for entry, _, _, _ in todo:  # the cluster is closed: nothing writes these any more
             if str(entry.path) not in finished:
                 remove_temporaries(entry, options.out)
         raise Interrupted(

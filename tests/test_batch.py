@@ -116,6 +116,12 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
     again = run_cli("batch", inputs, "--out", out, "--workers", "2", "--no-video")
     assert "0 done, 1 failed, 3 skipped" in again.stdout, again.stdout
     assert pq.read_table(part).equals(written)
+    # Other settings make other outputs: an input done with them is done again, not skipped.
+    smaller = run_cli("batch", inputs, "--out", out, "--workers", "2", "--no-video",
+                      "--max-size", "360")  # fmt: skip
+    assert "3 done, 1 failed, 0 skipped" in smaller.stdout, smaller.stdout
+    assert {tuple(r["size"]) for r in read_record(record)} == {(640, 360)}
+    assert len({r["settings"] for r in _manifest(out).values()}) == 1
 
 
 def _free_port() -> int:
