@@ -34,11 +34,11 @@ class UprightConfig:
 
 def sky_scores(rgb: NDArray[np.uint8], live: Box, strip: float = 0.2) -> NDArray[np.float64]:
     """How sky-like each side strip of the live box `live` is (top, right, bottom, left): the
-    median grey plus the median of blue over red, on every 2nd row and column. Each strip is
+    median grey plus the median of blue over red, on every 4th row and column. Each strip is
     `strip` of the box's extent across it, so a picture turned by quarter turns permutes the
     scores and changes none of them."""
     x0, y0, x1, y1 = live
-    picture = rgb[y0:y1:2, x0:x1:2].astype(np.int16)
+    picture = rgb[y0:y1:4, x0:x1:4].astype(np.int16)
     if picture.size == 0:
         return np.zeros(4)
     grey = picture.sum(axis=2) // 3

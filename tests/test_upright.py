@@ -92,7 +92,7 @@ def test_the_sky_votes_for_the_side_a_clip_was_turned_to(
 
 def test_a_turned_still_permutes_the_side_scores(data_dir: Path) -> None:
     """Each side's strip spans the same share of the picture across it, so a quarter turn
-    moves each side's score to the next side (within the rounding of every 2nd pixel)."""
+    moves each side's score to the next side (within the sampling of every 4th pixel)."""
     still = cv2.cvtColor(
         cv2.imread(str(data_dir / "test_images" / "straight_lines1.jpg")), cv2.COLOR_BGR2RGB
     )
