@@ -79,14 +79,15 @@ RollOption = Annotated[
 ]
 
 RotateOption = Annotated[
-    int,
+    str,
     typer.Option(
         "--rotate",
-        metavar="DEG",
+        metavar="DEG|auto",
         help="Turn the picture this many degrees clockwise to stand it upright: 180 for a "
         "dashcam mounted upside down without its flip setting, 90 or 270 for a phone's video "
         "that lost its rotation tag (decoding turns it, the calibration with it; --horizon "
-        "is a row of the upright picture).",
+        "is a row of the upright picture); 'auto' turns a video by what the sky of its first "
+        "6 s votes for (where the vote is clear; else it is read as stored, with a note).",
     ),
 ]
 
@@ -182,7 +183,7 @@ def _mounting(
     focal_length: float | None,
     calibration: str,
     dash_spacing: str | None = None,
-    rotate: int = 0,
+    rotate: str = "0",
 ) -> Mounting:
     """The `Mounting` the options state; a focal length beside a calibration file is refused
     (the calibration holds the lens's own)."""
@@ -200,8 +201,21 @@ def _mounting(
         _facing(facing),
         focal_length,
         _dash_spacing(dash_spacing),
-        rotate % 360,  # -90 is 270
+        *_rotate(rotate),
     )
+
+
+def _rotate(rotate: str) -> tuple[int, bool]:
+    """The --rotate option: degrees clockwise (-90 is 270) and whether the sky decides."""
+    if rotate.strip().lower() == "auto":
+        return 0, True
+    try:
+        return int(rotate) % 360, False
+    except ValueError:
+        raise InputError(
+            f"--rotate {rotate} is not a quarter turn; pass 90, 180 or 270 (degrees clockwise "
+            "that stand the picture upright), or auto to read it off the sky"
+        ) from None
 
 
 def _facing(facing: str) -> str:
@@ -399,7 +413,7 @@ def process_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
-    rotate: RotateOption = 0,
+    rotate: RotateOption = "0",
     after: Annotated[
         Path | None,
         typer.Option(
@@ -499,7 +513,7 @@ def batch_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
-    rotate: RotateOption = 0,
+    rotate: RotateOption = "0",
     drives: Annotated[
         bool,
         typer.Option(
@@ -557,7 +571,7 @@ def debug_command(
     facing: FacingOption = "auto",
     focal_length: FocalLengthOption = None,
     dash_spacing: DashSpacingOption = None,
-    rotate: RotateOption = 0,
+    rotate: RotateOption = "0",
     from_start: Annotated[
         bool,
         typer.Option(

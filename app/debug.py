@@ -20,7 +20,7 @@ from app.annotators import (
     lane_inset,
     offset_words,
 )
-from app.drivers import camera_for, lead_in, start_part
+from app.drivers import camera_for, lead_in, sky_mounting, start_part
 from app.errors import InputError
 from app.pipeline import HORIZON_WAIT_S, FrameOutput, FrameResult, Pipeline
 from app.sinks import ensure_writable_dir, write_image
@@ -272,7 +272,9 @@ def run_debug(
     ground and length scales, the lines', the tracks') is the one `process` had there. A run
     from the clip's first frame goes on from `after`, the part of the drive before it, as
     `process --after` does (its last `LEAD_IN_S` run first)."""
-    info = within_size(turned_info(probe_video(source), pipeline.mounting.rotate_deg), max_size)
+    probed = probe_video(source)
+    pipeline.mounting = sky_mounting(source, probed, pipeline.mounting, log)
+    info = within_size(turned_info(probed, pipeline.mounting.rotate_deg), max_size)
     for note in decoding_notes(info):
         log(f"note: {source.name}: {note}")
     pipeline.calibration, pipeline.mounting = camera_for(

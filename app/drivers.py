@@ -44,9 +44,11 @@ from app.sources import (
     within_size,
 )
 from camera_cal import (
+    SIDES,
     Calibration,
     UprightConfig,
     fits,
+    frames_vote,
     monochrome,
     sky_scores,
     sky_side,
@@ -380,6 +382,42 @@ def within_part(events: Sequence[Event], first: int, fps: float) -> tuple[Event,
     )
 
 
+# How long a video's start `--rotate auto` reads the sky of, and at what size (seconds, rows).
+SKY_START = (6.0, 360)
+
+
+def sky_mounting(
+    source: Path, info: VideoInfo, mounting: Mounting, log: Callable[[str], None]
+) -> Mounting:
+    """`mounting` with `--rotate auto` settled on the turn that the sky of the video's first
+    seconds (`SKY_START`) votes for, and `log` told of it; where the vote is not clear the
+    picture is taken as stored, and told so (`info` is the video as probed, before any turn)."""
+    if not mounting.rotate_auto:
+        return mounting
+    seconds, rows = SKY_START
+    small = within_size(info, rows)
+    count = min(small.n_frames, max(1, round(seconds * small.fps)))
+    sampled = [f for k, f in enumerate(read_frames(source, small, 0, count)) if k % SKY.every == 0]
+    vote = frames_vote(sampled, SKY)
+    side, turn = vote.side, vote.turn_deg
+    if side is None or turn is None:
+        log(
+            f"note: {source.name}: --rotate auto could not tell which way up it is (its "
+            f"brightest, bluest side held no {SKY.least:.0%} of the {sum(vote.votes)} sure "
+            f"votes of its first {seconds:g} s, {SKY.min_votes} at least): it is read as "
+            "stored; pass --rotate DEG if it is turned"
+        )
+        return replace(mounting, rotate_auto=False)
+    if turn:
+        where = f"{'at' if side == 2 else 'on'} its {SIDES[side]}"
+        log(
+            f"note: {source.name}: --rotate auto: its sky lies {where} in {vote.votes[side]} "
+            f"of {sum(vote.votes)} frames of its first {seconds:g} s: it is turned {turn} "
+            "degrees clockwise to stand it upright (the record's rotate_deg)"
+        )
+    return replace(mounting, rotate_deg=turn, rotate_auto=False)
+
+
 def process_video(
     source: Path,
     output: Path | None,
@@ -415,9 +453,10 @@ def process_video(
     """
     warm_up = warm_up_opencv()
     try:
-        mounting = mounting or Mounting()
+        probed = probe_video(source)
+        mounting = sky_mounting(source, probed, mounting or Mounting(), log)
         upright = mounting.rotate_deg
-        info = within_size(turned_info(probe_video(source), upright), max_size)
+        info = within_size(turned_info(probed, upright), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)
         calibration, mounting = camera_for(
             calibration, mounting, info, source.name, calibration_required, log
@@ -559,6 +598,12 @@ def process_still(
     without undistortion, and says so.
     """
     mounting = mounting or Mounting()
+    if mounting.rotate_auto:
+        log(
+            f"note: {source.name}: --rotate auto reads the sky of a video's frames, and one "
+            "still can mislead: it is read as stored; pass --rotate DEG if it is turned"
+        )
+        mounting = replace(mounting, rotate_auto=False)
     check_rotate(mounting.rotate_deg)
     image = turned_image(read_image(source), mounting.rotate_deg)
     size = (image.shape[1], image.shape[0])

@@ -33,7 +33,8 @@ class Mounting:
     scale is read where the lens is not known (`camera_cal.DashScale`; None: not read),
     and the quarter turns, in degrees clockwise, that stand its picture upright as stored (a
     camera mounted upside down: 180; a phone's video that lost its rotation tag: 90 or 270):
-    decoding turns the frames, and the calibration with them."""
+    decoding turns the frames, and the calibration with them; or, `rotate_auto`, the turn the
+    sky of a video's first seconds votes for (`app.drivers.sky_mounting`)."""
 
     horizon_y: float | None = None
     camera_height_m: float | None = None
@@ -43,6 +44,7 @@ class Mounting:
     focal_mm: float | None = None
     dash_spacing_m: float | None = US_DASH_SPACING_M
     rotate_deg: int = 0
+    rotate_auto: bool = False
 
     @property
     def rear(self) -> bool | None:
@@ -182,8 +184,9 @@ def check_rotate(rotate_deg: int) -> None:
 def upright_note(vote: SkyVote, told_deg: int) -> str | None:
     """What a user should hear where the frames' sky lies on another side than the top
     (`vote`, taken on the picture after the `told_deg` turn): the picture looks stored turned,
-    and the turn that stands it upright. Only told, never acted on: a dark skyline over a bright
-    road outvotes the sky in a few clips' frames (README, Which way up). None where the sky
+    and the turn that stands it upright. Told, acted on only where the user asks (`--rotate
+    auto`): a dark skyline over a bright road outvotes the sky in a few clips' frames (README,
+    Which way up). None where the sky
     voted for the top or did not hold the vote."""
     side, turn = vote.side, vote.turn_deg
     if side is None or turn is None or side == 0:

@@ -32,7 +32,15 @@ from camera_cal.undistort import (
     focal_scale_height,
     undistorter_for,
 )
-from camera_cal.upright import SIDES, SkyVote, UprightConfig, sky_scores, sky_side, sky_vote
+from camera_cal.upright import (
+    SIDES,
+    SkyVote,
+    UprightConfig,
+    frames_vote,
+    sky_scores,
+    sky_side,
+    sky_vote,
+)
 
 __all__ = [
     "SIDES",
@@ -58,6 +66,7 @@ __all__ = [
     "find_board_corners",
     "fits",
     "focal_scale_height",
+    "frames_vote",
     "horizon_estimates",
     "load_calibration",
     "monochrome",

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-Box = tuple[int, int, int, int]
+from camera_cal.scene import Box, live_box
 
 # The picture's sides in the order of `sky_scores`; side k lies 90k degrees clockwise of the top.
 SIDES = ("top", "right", "bottom", "left")
@@ -87,3 +87,14 @@ def sky_vote(sides: Sequence[int | None], least: float = 0.8, min_votes: int = 1
         votes=(int(votes[0]), int(votes[1]), int(votes[2]), int(votes[3])),
         side=best if held else None,
     )
+
+
+def frames_vote(frames: Sequence[NDArray[np.uint8]], config: UprightConfig) -> SkyVote:
+    """The sky vote of `frames` (RGB, as sampled by the caller), each scored within the live
+    box their brightest values give (black bars are no sky)."""
+    if not frames:
+        return sky_vote([], config.least, config.min_votes)
+    brightest = np.max([f.max(axis=2) for f in frames], axis=0)
+    live = live_box(brightest.max(axis=1), brightest.max(axis=0))
+    sides = [sky_side(sky_scores(f, live, config.strip), config.margin) for f in frames]
+    return sky_vote(sides, config.least, config.min_votes)

@@ -10,50 +10,26 @@ import cv2
 import numpy as np
 import pytest
 
+from app.drivers import SKY, SKY_START
 from app.mounting import upright_note
-from app.sources import ffmpeg_binary, probe_video, read_frames
-from camera_cal.scene import live_box
-from camera_cal.upright import SkyVote, UprightConfig, sky_scores, sky_side, sky_vote
-from tests.helpers import read_record, run_cli
+from app.sources import ffmpeg_binary, probe_video, read_frames, within_size
+from camera_cal.upright import SkyVote, frames_vote, sky_scores, sky_side, sky_vote
+from tests.helpers import assert_one_line_error, read_record, run_cli
 
-CONFIG = UprightConfig()
-
-
-def _sampled(video: Path, limit: int = 500) -> tuple[list[np.ndarray], tuple[int, int, int, int]]:
-    """Every `CONFIG.every`-th of the first `limit` frames, and their live box (inside bars)."""
-    info = probe_video(video)
-    frames, row_max, col_max = [], None, None
-    for k, frame in enumerate(read_frames(video, info, 0, min(limit, info.n_frames))):
-        grey = frame.max(axis=2)
-        rows, cols = grey.max(axis=1), grey.max(axis=0)
-        row_max = rows if row_max is None else np.maximum(row_max, rows)
-        col_max = cols if col_max is None else np.maximum(col_max, cols)
-        if k % CONFIG.every == 0:
-            frames.append(frame)
-    assert row_max is not None and col_max is not None
-    return frames, live_box(row_max, col_max)
+CONFIG = SKY
 
 
-def _turned_box(
-    box: tuple[int, int, int, int], size: tuple[int, int], quarters: int
-) -> tuple[int, int, int, int]:
-    """`box` of a picture of `size` (width, height) turned `quarters` quarter turns clockwise."""
-    for _ in range(quarters):
-        x0, y0, x1, y1 = box
-        w, h = size
-        box, size = (h - y1, x0, h - y0, x1), (h, w)
-    return box
+def _sampled(video: Path, limit: int = 500) -> list[np.ndarray]:
+    """Every `CONFIG.every`-th of the first `limit` frames at 360 rows, as `--rotate auto` reads
+    a video's start."""
+    info = within_size(probe_video(video), SKY_START[1])
+    frames = read_frames(video, info, 0, min(limit, info.n_frames))
+    return [frame for k, frame in enumerate(frames) if k % CONFIG.every == 0]
 
 
-def _vote(frames: list[np.ndarray], live: tuple[int, int, int, int], quarters: int) -> SkyVote:
+def _vote(frames: list[np.ndarray], quarters: int) -> SkyVote:
     """The sky vote of `frames` turned `quarters` quarter turns clockwise."""
-    h, w = frames[0].shape[:2]
-    box = _turned_box(live, (w, h), quarters)
-    sides = [
-        sky_side(sky_scores(np.rot90(f, -quarters), box, CONFIG.strip), CONFIG.margin)
-        for f in frames
-    ]
-    return sky_vote(sides, CONFIG.least, CONFIG.min_votes)
+    return frames_vote([np.rot90(f, -quarters) for f in frames], CONFIG)
 
 
 @pytest.mark.parametrize(
@@ -81,11 +57,11 @@ def test_the_sky_votes_for_the_side_a_clip_was_turned_to(
     folder, name = clip.split("/")
     root = request.getfixturevalue("wild_dir" if folder == "wild" else "data_dir")
     video = root / name if folder == "wild" else root / clip
-    frames, live = _sampled(video)
-    upright = _vote(frames, live, 0)
+    frames = _sampled(video)
+    upright = _vote(frames, 0)
     assert upright.side == 0 and upright.turn_deg == 0, upright
     for quarters, turn in ((1, 270), (2, 180), (3, 90)):
-        vote = _vote(frames, live, quarters)
+        vote = _vote(frames, quarters)
         assert vote.side == quarters and vote.turn_deg == turn, (quarters, vote)
         assert vote.votes[quarters] == upright.votes[0], (quarters, vote, upright)
 
@@ -138,10 +114,15 @@ def test_the_note_names_the_turn_that_stands_the_picture_upright() -> None:
     assert upright_note(SkyVote((6, 0, 6, 0), None), 0) is None
 
 
-def test_process_says_a_clip_stored_turned_looks_turned(data_dir: Path, tmp_path: Path) -> None:
-    """project_cut_1 stored a quarter anticlockwise (its sky on the left): `process` notes that
-    it looks turned and that --rotate 90 stands it upright, and still reads the picture as
-    stored (the note is never acted on); told --rotate 90 it says nothing of the sky."""
+def test_process_says_a_clip_stored_turned_looks_turned_and_auto_turns_it(
+    data_dir: Path, tmp_path: Path
+) -> None:
+    """project_cut_1 stored a quarter anticlockwise (its sky on the left): untold, `process`
+    reads it as stored and notes that it looks turned and that --rotate 90 stands it upright;
+    told --rotate 90 it says nothing of the sky. `--rotate auto` turns it 90 degrees, says so,
+    and records what --rotate 90 records; the clip as it is, `--rotate auto`, is left as it is.
+    A still is never turned by the sky (one frame can mislead), and a --rotate that is neither
+    a number nor auto is refused in one line."""
     clip = tmp_path / "anticlockwise.mp4"
     video = data_dir / "videos" / "project_cut_1.mp4"
     command = [ffmpeg_binary(), "-loglevel", "error", "-i", str(video), "-vf",
@@ -157,4 +138,22 @@ def test_process_says_a_clip_stored_turned_looks_turned(data_dir: Path, tmp_path
     told = run_cli("process", clip, *common, "--rotate", "90")
     assert told.returncode == 0, told.stderr
     assert "looks stored turned" not in told.stdout + told.stderr
-    assert {tuple(r["size"]) for r in read_record(record)} == {(1280, 720)}
+    told_rows = read_record(record)
+    assert {(tuple(r["size"]), r["rotate_deg"]) for r in told_rows} == {((1280, 720), 90)}
+    auto = run_cli("process", clip, *common, "--rotate", "auto")
+    assert auto.returncode == 0, auto.stderr
+    said = auto.stdout + auto.stderr
+    assert "--rotate auto: its sky lies on its left" in said and "turned 90 degrees" in said
+    assert "looks stored turned" not in said
+    assert read_record(record) == told_rows
+    level = run_cli("process", video, *common, "--rotate", "AUTO")
+    assert level.returncode == 0, level.stderr
+    assert "--rotate auto" not in level.stdout + level.stderr
+    assert all("rotate_deg" not in r for r in read_record(record))
+    still = data_dir / "test_images" / "test5.jpg"  # its sky outvoted by a white road
+    image = run_cli("process", still, "--no-vehicles", "-o", tmp_path / "s.jpg", "--rotate", "auto")
+    assert image.returncode == 0, image.stderr
+    assert "one still can mislead: it is read as stored" in image.stdout + image.stderr
+    bad = run_cli("process", video, "-o", tmp_path / "x.mp4", "--rotate", "sideways")
+    assert_one_line_error(bad, "--rotate sideways", "or auto")
+    assert not (tmp_path / "x.mp4").exists()
