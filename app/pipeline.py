@@ -129,9 +129,7 @@ def lengthened(
     return replace(lane, lane=replace(lane.lane, curvature_m=radius))
 
 
-def measured_in(
-    lane: LaneResult | None, started: _Started, straight_m: float
-) -> LaneResult | None:
+def measured_in(lane: LaneResult | None, started: _Started, straight_m: float) -> LaneResult | None:
     """The lane stage's result with its lane's radius, offset and width read in the warp at
     the horizon as estimated (`_Started.measured`), as the facts' metres are, where the stages
     are placed elsewhere: placed 1.1 % of the height above and below US winter's horizon, the

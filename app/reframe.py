@@ -469,9 +469,7 @@ def turned_labels(
             moved = np.column_stack([xs, rows, np.ones(len(rows))]) @ matrix.T
             order = np.argsort(moved[:, 1])
             ys, mx = moved[order, 1], moved[order, 0]
-            lane[side] = {
-                int(r): float(np.interp(r, ys, mx)) for r in rows if ys[0] <= r <= ys[-1]
-            }
+            lane[side] = {int(r): float(np.interp(r, ys, mx)) for r in rows if ys[0] <= r <= ys[-1]}
         out[k] = FrameLabels(tuple(vehicles), lane)
     return out
 
