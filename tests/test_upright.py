@@ -157,3 +157,29 @@ def test_process_says_a_clip_stored_turned_looks_turned_and_auto_turns_it(
     bad = run_cli("process", video, "-o", tmp_path / "x.mp4", "--rotate", "sideways")
     assert_one_line_error(bad, "--rotate sideways", "or auto")
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_no_reframing_of_a_clip_moves_its_sky(data_dir: Path) -> None:
+    """project_cut_2 re-framed every way the re-framed table does (the horizon moved, crops,
+    bars, sizes, mirrored, turned a few degrees, a phone held upright, dusk, a wider lens)
+    votes for the top; without colour it may be unsure, never for another side."""
+    from app.reframe import (
+        MONOCHROME_FRAMING,
+        UNTOLD_ROLL_FRAMINGS,
+        WIDE_LENS_FRAMING,
+        dusk_framings,
+        reframe_image,
+        standard_framings,
+        upright_framing,
+    )
+
+    video = data_dir / "videos" / "project_cut_2.mp4"
+    info = probe_video(video)
+    frames = [f for k, f in enumerate(read_frames(video, info)) if k % CONFIG.every == 0]
+    framings = (*standard_framings(info.size), upright_framing(info.size),
+                *dusk_framings(info.size), *UNTOLD_ROLL_FRAMINGS, WIDE_LENS_FRAMING)  # fmt: skip
+    for framing in framings:
+        vote = frames_vote([reframe_image(f, framing) for f in frames], CONFIG)
+        assert vote.side == 0, (framing.name, vote)
+    grey = frames_vote([reframe_image(f, MONOCHROME_FRAMING) for f in frames], CONFIG)
+    assert grey.side in (0, None) and sum(grey.votes[1:]) == 0, grey
