@@ -402,9 +402,9 @@ def sky_mounting(
     side, turn = vote.side, vote.turn_deg
     if side is None or turn is None:
         log(
-            f"note: {source.name}: --rotate auto could not tell which way up it is (its "
-            f"brightest, bluest side held no {SKY.least:.0%} of the {sum(vote.votes)} sure "
-            f"votes of its first {seconds:g} s, {SKY.min_votes} at least): it is read as "
+            f"note: {source.name}: --rotate auto could not tell which way up it is (its sky "
+            f"stood out in {sum(vote.votes)} sampled frames of its first {seconds:g} s; it "
+            f"takes {SKY.min_votes}, {SKY.least:.0%} of them on one side): it is read as "
             "stored; pass --rotate DEG if it is turned"
         )
         return replace(mounting, rotate_auto=False)

@@ -120,7 +120,8 @@ def test_process_says_a_clip_stored_turned_looks_turned_and_auto_turns_it(
     """project_cut_1 stored a quarter anticlockwise (its sky on the left): untold, `process`
     reads it as stored and notes that it looks turned and that --rotate 90 stands it upright;
     told --rotate 90 it says nothing of the sky. `--rotate auto` turns it 90 degrees, says so,
-    and records what --rotate 90 records; the clip as it is, `--rotate auto`, is left as it is.
+    and records what --rotate 90 records; the clip as it is, `--rotate auto`, is left as it is,
+    and so is a clip too short to judge, with a note.
     A still is never turned by the sky (one frame can mislead), and a --rotate that is neither
     a number nor auto is refused in one line."""
     clip = tmp_path / "anticlockwise.mp4"
@@ -149,6 +150,10 @@ def test_process_says_a_clip_stored_turned_looks_turned_and_auto_turns_it(
     level = run_cli("process", video, *common, "--rotate", "AUTO")
     assert level.returncode == 0, level.stderr
     assert "--rotate auto" not in level.stdout + level.stderr
+    assert all("rotate_deg" not in r for r in read_record(record))
+    short = run_cli("process", data_dir / "videos" / "test_video.mp4", *common, "--rotate", "auto")
+    assert short.returncode == 0, short.stderr  # 38 frames: 8 votes, too few to judge
+    assert "--rotate auto could not tell which way up" in short.stdout + short.stderr
     assert all("rotate_deg" not in r for r in read_record(record))
     still = data_dir / "test_images" / "test5.jpg"  # its sky outvoted by a white road
     image = run_cli("process", still, "--no-vehicles", "-o", tmp_path / "s.jpg", "--rotate", "auto")
