@@ -280,6 +280,7 @@ FRAME_COLUMNS = (
     ("rear", "bool"),  # a rear camera's frame (the record's facing)
     ("roll_deg", "double"),  # the turn the frame was levelled by (stated or read; 0: none)
     ("focal_mm", "double"),  # the lens's focal length where it gave the distances (null: none)
+    ("rotate_deg", "int64"),  # the quarter turn that stood the stored picture upright (0: none)
 )
 VEHICLE_COLUMNS = (
     ("video", "string"),
@@ -342,6 +343,7 @@ def write_table_parts(
             "rear": seen_from_behind(r),
             "roll_deg": r.get("roll_deg", 0.0),
             "focal_mm": r.get("focal_mm"),
+            "rotate_deg": r.get("rotate_deg", 0),
         }
         for r in rows
     ]

@@ -103,6 +103,7 @@ def test_local_cluster_three_done_one_failed_then_all_skipped(
         assert values == [r[column] for r in lines], column
     assert not any(f["rear"] for f in frames)  # front cameras all
     assert all(f["roll_deg"] == 0 for f in frames)  # level pictures all
+    assert all(f["rotate_deg"] == 0 for f in frames)  # upright as stored all
     assert all(f["focal_mm"] is None for f in frames)  # the shipped calibration gave the lens
     assert {v["lane"] for v in vehicles} <= {"ego", "left", "right", "other"}
     events = ds.dataset(out / "table" / "events").to_table()

@@ -32,6 +32,13 @@ def _vote(frames: list[np.ndarray], quarters: int) -> SkyVote:
     return frames_vote([np.rot90(f, -quarters) for f in frames], CONFIG)
 
 
+def _stored_anticlockwise(video: Path, clip: Path) -> None:
+    """`video` re-encoded into `clip` turned a quarter anticlockwise (its sky on the left)."""
+    command = [ffmpeg_binary(), "-loglevel", "error", "-i", str(video), "-vf",
+               "transpose=cclock", "-c:v", "libx264", "-crf", "18", str(clip)]  # fmt: skip
+    subprocess.run(command, check=True)
+
+
 @pytest.mark.parametrize(
     "clip",
     [
@@ -126,9 +133,7 @@ def test_process_says_a_clip_stored_turned_looks_turned_and_auto_turns_it(
     a number nor auto is refused in one line."""
     clip = tmp_path / "anticlockwise.mp4"
     video = data_dir / "videos" / "project_cut_1.mp4"
-    command = [ffmpeg_binary(), "-loglevel", "error", "-i", str(video), "-vf",
-               "transpose=cclock", "-c:v", "libx264", "-crf", "18", str(clip)]  # fmt: skip
-    subprocess.run(command, check=True)
+    _stored_anticlockwise(video, clip)
     record = tmp_path / "r.jsonl"
     common = ("--no-vehicles", "--calibration", "none", "--json", record, "-o", tmp_path / "o.mp4")
     untold = run_cli("process", clip, *common)
@@ -188,3 +193,29 @@ def test_no_reframing_of_a_clip_moves_its_sky(data_dir: Path) -> None:
         assert vote.side == 0, (framing.name, vote)
     grey = frames_vote([reframe_image(f, MONOCHROME_FRAMING) for f in frames], CONFIG)
     assert grey.side in (0, None) and sum(grey.votes[1:]) == 0, grey
+
+
+def test_batch_turns_a_clip_stored_turned_with_rotate_auto(data_dir: Path, tmp_path: Path) -> None:
+    """`batch --rotate auto` over a folder of project_cut_1 stored a quarter anticlockwise and
+    as it is: the turned one is stood upright (its frames table says rotate_deg 90 and its
+    manifest notes say why), the other is left as it is."""
+    import pyarrow.parquet as pq
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    video = data_dir / "videos" / "project_cut_1.mp4"
+    _stored_anticlockwise(video, folder / "turned.mp4")
+    (folder / "level.mp4").write_bytes(video.read_bytes())
+    out = tmp_path / "out"
+    result = run_cli("batch", folder, "--out", out, "--workers", "1", "--no-video",
+                     "--rotate", "auto")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    frames = pq.read_table(out / "table" / "frames").to_pylist()
+    turns = {(f["video"], f["rotate_deg"]) for f in frames}
+    assert turns == {("turned.mp4", 90), ("level.mp4", 0)}, turns
+    notes = {
+        Path(r["path"]).name: r["notes"]
+        for r in pq.read_table(out / "table" / "manifest.parquet").to_pylist()
+    }
+    assert "--rotate auto: its sky lies on its left" in notes["turned.mp4"]
+    assert "--rotate auto" not in notes["level.mp4"]
