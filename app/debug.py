@@ -273,7 +273,7 @@ def run_debug(
     from the clip's first frame goes on from `after`, the part of the drive before it, as
     `process --after` does (its last `LEAD_IN_S` run first)."""
     probed = probe_video(source)
-    pipeline.mounting = sky_mounting(source, probed, pipeline.mounting, log)
+    pipeline.mounting = sky_mounting(source, probed, pipeline.mounting, log, after)
     info = within_size(turned_info(probed, pipeline.mounting.rotate_deg), max_size)
     for note in decoding_notes(info):
         log(f"note: {source.name}: {note}")

@@ -386,34 +386,52 @@ def within_part(events: Sequence[Event], first: int, fps: float) -> tuple[Event,
 SKY_START = (6.0, 360)
 
 
-def sky_mounting(
-    source: Path, info: VideoInfo, mounting: Mounting, log: Callable[[str], None]
-) -> Mounting:
-    """`mounting` with `--rotate auto` settled on the turn that the sky of the video's first
-    seconds (`SKY_START`) votes for, and `log` told of it; where the vote is not clear the
-    picture is taken as stored, and told so (`info` is the video as probed, before any turn)."""
-    if not mounting.rotate_auto:
-        return mounting
+def sky_start(source: Path, info: VideoInfo) -> list[Frame]:
+    """The frames of a video's first seconds that `--rotate auto` scores (`SKY_START`: every
+    `SKY.every`-th, at 360 rows; `info` is the video as probed, before any turn)."""
     seconds, rows = SKY_START
     small = within_size(info, rows)
     count = min(small.n_frames, max(1, round(seconds * small.fps)))
-    sampled = [f for k, f in enumerate(read_frames(source, small, 0, count)) if k % SKY.every == 0]
+    return [f for k, f in enumerate(read_frames(source, small, 0, count)) if k % SKY.every == 0]
+
+
+def sky_mounting(
+    source: Path,
+    info: VideoInfo,
+    mounting: Mounting,
+    log: Callable[[str], None],
+    after: Path | None = None,
+) -> Mounting:
+    """`mounting` with `--rotate auto` settled on the turn that the sky of the video's first
+    seconds votes for (with those of `after`'s, the part of the drive before it, of the same
+    camera and size: the parts of a drive are turned alike), and `log` told of it; where the
+    vote is not clear the picture is taken as stored, and told so (`info` is the video as
+    probed, before any turn)."""
+    if not mounting.rotate_auto:
+        return mounting
+    sampled = sky_start(source, info)
+    seconds = f"its first {SKY_START[0]:g} s"
+    if after is not None and sampled:
+        earlier = sky_start(after, probe_video(after))
+        if earlier and earlier[0].shape == sampled[0].shape:
+            sampled = earlier + sampled
+            seconds += f" and {after.name}'s, the part before it"
     vote = frames_vote(sampled, SKY)
     side, turn = vote.side, vote.turn_deg
     if side is None or turn is None:
         log(
             f"note: {source.name}: --rotate auto could not tell which way up it is (its sky "
-            f"stood out in {sum(vote.votes)} sampled frames of its first {seconds:g} s; it "
-            f"takes {SKY.min_votes}, {SKY.least:.0%} of them on one side): it is read as "
-            "stored; pass --rotate DEG if it is turned"
+            f"stood out in {sum(vote.votes)} sampled frames of {seconds}; it takes "
+            f"{SKY.min_votes}, {SKY.least:.0%} of them on one side): it is read as stored; "
+            "pass --rotate DEG if it is turned"
         )
         return replace(mounting, rotate_auto=False)
     if turn:
         where = f"{'at' if side == 2 else 'on'} its {SIDES[side]}"
         log(
             f"note: {source.name}: --rotate auto: its sky lies {where} in {vote.votes[side]} "
-            f"of {sum(vote.votes)} frames of its first {seconds:g} s: it is turned {turn} "
-            "degrees clockwise to stand it upright (the record's rotate_deg)"
+            f"of {sum(vote.votes)} frames of {seconds}: it is turned {turn} degrees clockwise "
+            "to stand it upright (the record's rotate_deg)"
         )
     return replace(mounting, rotate_deg=turn, rotate_auto=False)
 
@@ -454,7 +472,7 @@ def process_video(
     warm_up = warm_up_opencv()
     try:
         probed = probe_video(source)
-        mounting = sky_mounting(source, probed, mounting or Mounting(), log)
+        mounting = sky_mounting(source, probed, mounting or Mounting(), log, after)
         upright = mounting.rotate_deg
         info = within_size(turned_info(probed, upright), max_size)
         first, last = frame_range(info.fps, info.n_frames, start_s, end_s)

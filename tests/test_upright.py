@@ -219,3 +219,22 @@ def test_batch_turns_a_clip_stored_turned_with_rotate_auto(data_dir: Path, tmp_p
     }
     assert "--rotate auto: its sky lies on its left" in notes["turned.mp4"]
     assert "--rotate auto" not in notes["level.mp4"]
+
+
+def test_rotate_auto_votes_with_the_part_before(data_dir: Path, tmp_path: Path) -> None:
+    """A drive's parts are turned alike: test_video stored turned is too short to judge alone
+    (8 votes), but `--after` project_cut_1 stored turned alike, `--rotate auto` pools the two
+    parts' votes and turns it 90 degrees, saying so."""
+    first, second = tmp_path / "part1.mp4", tmp_path / "part2.mp4"
+    _stored_anticlockwise(data_dir / "videos" / "project_cut_1.mp4", first)
+    _stored_anticlockwise(data_dir / "videos" / "test_video.mp4", second)
+    record = tmp_path / "r.jsonl"
+    common = ("--no-vehicles", "--calibration", "none", "--json", record, "-o", tmp_path / "o.mp4")
+    alone = run_cli("process", second, *common, "--rotate", "auto")
+    assert alone.returncode == 0, alone.stderr
+    assert "could not tell which way up" in alone.stdout + alone.stderr
+    pooled = run_cli("process", second, *common, "--rotate", "auto", "--after", first)
+    assert pooled.returncode == 0, pooled.stderr
+    said = pooled.stdout + pooled.stderr
+    assert "its sky lies on its left" in said and "part1.mp4's, the part before it" in said
+    assert {(tuple(r["size"]), r["rotate_deg"]) for r in read_record(record)} == {((1280, 720), 90)}
