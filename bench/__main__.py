@@ -10,6 +10,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from app.annotators import compose, default_annotators
 from app.assembly import build_stages
-from app.drivers import process_video
+from app.drivers import SKY, process_video
 from app.evaluate import evaluate, load_labels
 from app.mining import dimmed_copy, grainy
 from app.pipeline import Pipeline
@@ -41,7 +42,7 @@ from app.reframe import (
 from app.runtime import tune_process
 from app.sinks import FAST_PRESET, VideoWriter
 from app.sources import probe_video, read_frames
-from camera_cal import default_calibration_path, load_calibration
+from camera_cal import default_calibration_path, load_calibration, sky_scores, sky_side
 from vehicles.config import DetectorConfig
 from vehicles.detector import VehicleDetector
 from vehicles.features import patch_features
@@ -56,8 +57,9 @@ def _clip_paths(data: Path) -> list[Path]:
 
 
 def stage_times(clip: Path) -> dict[str, float]:
-    """Mean ms per frame of decode, undistort, lanes, vehicles, compose and encode, on one core
-    (encode: ffmpeg's wall time for the composed frames, timed in a pass of its own)."""
+    """Mean ms per frame of decode, undistort, lanes, vehicles, the sky's side (scored every
+    `SKY.every`-th frame), compose and encode, on one core (encode: ffmpeg's wall time for the
+    composed frames, timed in a pass of its own)."""
     info = probe_video(clip)
     # Stages one after the other, so each figure is that stage's own cost on one core.
     pipeline = Pipeline(load_calibration(default_calibration_path()), *build_stages())
@@ -76,6 +78,11 @@ def stage_times(clip: Path) -> dict[str, float]:
         out = pipeline.run(frame)
         for key, value in out.result.timings_ms.items():
             totals[key] = totals.get(key, 0.0) + value
+        if n % SKY.every == 0:  # the sky's side, scored as `process` scores it
+            t0 = time.perf_counter()
+            live = out.result.scene.live if out.result.scene is not None else (0, 0, *info.size)
+            sky_side(sky_scores(out.undistorted, live, SKY.strip), SKY.margin)
+            totals["sky"] = totals.get("sky", 0.0) + (time.perf_counter() - t0) * 1000
         t0 = time.perf_counter()
         composed.append(compose(out.undistorted, out.result, annotators))
         totals["compose"] += (time.perf_counter() - t0) * 1000
@@ -119,7 +126,7 @@ def _tree_rss_mib(pid: int) -> float:
 
 
 def end_to_end(
-    clip: Path, end_s: float | None = None, after: Path | None = None
+    clip: Path, end_s: float | None = None, after: Path | None = None, options: Sequence[str] = ()
 ) -> dict[str, float]:
     """`roadview process` with lanes, vehicles, video and record (`--after` a part before):
     fps, and peak memory of the whole process tree (worker and ffmpeg processes included),
@@ -130,6 +137,7 @@ def end_to_end(
         command += ["--end", str(end_s)]
     if after is not None:
         command += ["--after", str(after)]
+    command += list(options)
     with tempfile.TemporaryDirectory() as tmp:
         command += ["-o", f"{tmp}/o.mp4", "--json", f"{tmp}/o.jsonl"]
         t0 = time.perf_counter()
@@ -451,6 +459,8 @@ def main() -> None:
         floor_short = floor_fps(short)
         # A drive's next part: the 50 s clip's last 10 s are run first (`--after`).
         e2e_after = end_to_end(short, after=long)
+        # `--rotate auto`: the sky of the first 6 s read before the run.
+        e2e_auto = end_to_end(short, options=("--rotate", "auto"))
     startup = [end_to_end(_clip_paths(args.data)[0], end_s=0.04)["seconds"] for _ in range(3)]
     report["long_clip"] = {
         "frames": info.n_frames,
@@ -465,6 +475,8 @@ def main() -> None:
     report["startup_s"] = startup
     lead_in_s = e2e_after["seconds"] - float(np.median([r["seconds"] for r in e2e_short]))
     report["clip_100_frames"]["after_lead_in_s"] = lead_in_s
+    rotate_auto_s = e2e_auto["seconds"] - float(np.median([r["seconds"] for r in e2e_short]))
+    report["clip_100_frames"]["rotate_auto_s"] = rotate_auto_s
     print(
         f"{info.n_frames / info.fps:.0f} s clip ({info.n_frames} frames, shared clips in turn): "
         f"end to end {e2e['fps']:.1f} fps, {e2e['seconds']:.1f} s "
@@ -481,7 +493,9 @@ def main() -> None:
     )
     print(
         f"the 100-frame clip after the 50 s one (--after: its last 10 s run first): "
-        f"{e2e_after['seconds']:.1f} s, {lead_in_s:.1f} s more than alone"
+        f"{e2e_after['seconds']:.1f} s, {lead_in_s:.1f} s more than alone; with --rotate auto "
+        f"(its first 6 s read for the sky first) {e2e_auto['seconds']:.1f} s, "
+        f"{rotate_auto_s:.2f} s more"
     )
     scaling = batch_scaling(args.data)
     report["batch"] = scaling
