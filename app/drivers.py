@@ -22,6 +22,7 @@ from app.mounting import (
     aim_note,
     check_mounting,
     check_rotate,
+    sky_where,
     upright_note,
     video_mounting,
 )
@@ -44,14 +45,12 @@ from app.sources import (
     within_size,
 )
 from camera_cal import (
-    SIDES,
     Calibration,
     UprightConfig,
     fits,
+    frame_sky,
     frames_vote,
     monochrome,
-    sky_scores,
-    sky_side,
     sky_vote,
     turned,
 )
@@ -427,11 +426,10 @@ def sky_mounting(
         )
         return replace(mounting, rotate_auto=False)
     if turn:
-        where = f"{'at' if side == 2 else 'on'} its {SIDES[side]}"
         log(
-            f"note: {source.name}: --rotate auto: its sky lies {where} in {vote.votes[side]} "
-            f"of {sum(vote.votes)} frames of {seconds}: it is turned {turn} degrees clockwise "
-            "to stand it upright (the record's rotate_deg)"
+            f"note: {source.name}: --rotate auto: its sky lies {sky_where(side)} in "
+            f"{vote.votes[side]} of {sum(vote.votes)} frames of {seconds}: it is turned {turn} "
+            "degrees clockwise to stand it upright (the record's rotate_deg)"
         )
     return replace(mounting, rotate_deg=turn, rotate_auto=False)
 
@@ -529,10 +527,7 @@ def process_video(
                     x0, _, x1, _ = scene.live
                     aims.append((scene.vanishing_x - (x0 + x1) / 2) / max(1, x1 - x0))
             if offset % SKY.every == 0:
-                h, w = out.undistorted.shape[:2]
-                live = (0, 0, w, h) if scene is None else scene.live
-                scores = sky_scores(out.undistorted, live, SKY.strip)
-                skies.append(sky_side(scores, SKY.margin))
+                skies.append(frame_sky(out.undistorted, None if scene is None else scene.live, SKY))
             if colourless and offset <= told_at and offset % 5 == 0:
                 colourless = monochrome(out.undistorted)
             if colourless and offset == told_at:

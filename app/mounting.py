@@ -181,6 +181,11 @@ def check_rotate(rotate_deg: int) -> None:
         )
 
 
+def sky_where(side: int) -> str:
+    """Where on the picture side `side` (index into `SIDES`) is, in a note's words."""
+    return f"{'at' if side == 2 else 'on'} its {SIDES[side]}"
+
+
 def upright_note(vote: SkyVote, told_deg: int) -> str | None:
     """What a user should hear where the frames' sky lies on another side than the top
     (`vote`, taken on the picture after the `told_deg` turn): the picture looks stored turned,
@@ -194,7 +199,7 @@ def upright_note(vote: SkyVote, told_deg: int) -> str | None:
     total = (told_deg + turn) % 360
     advice = f"pass --rotate {total}" if total else f"drop --rotate {told_deg}"
     turned = f" after --rotate {told_deg}" if told_deg else ""
-    where = f"{'at' if side == 2 else 'on'} its {SIDES[side]}"
+    where = sky_where(side)
     return (
         f"it looks stored turned{turned}: its sky (the brightest, bluest side) lies {where} in "
         f"{vote.votes[side]} of {sum(vote.votes)} frames sampled; if so, {advice} to stand it "

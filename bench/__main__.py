@@ -42,7 +42,7 @@ from app.reframe import (
 from app.runtime import tune_process
 from app.sinks import FAST_PRESET, VideoWriter
 from app.sources import probe_video, read_frames
-from camera_cal import default_calibration_path, load_calibration, sky_scores, sky_side
+from camera_cal import default_calibration_path, frame_sky, load_calibration
 from vehicles.config import DetectorConfig
 from vehicles.detector import VehicleDetector
 from vehicles.features import patch_features
@@ -80,8 +80,8 @@ def stage_times(clip: Path) -> dict[str, float]:
             totals[key] = totals.get(key, 0.0) + value
         if n % SKY.every == 0:  # the sky's side, scored as `process` scores it
             t0 = time.perf_counter()
-            live = out.result.scene.live if out.result.scene is not None else (0, 0, *info.size)
-            sky_side(sky_scores(out.undistorted, live, SKY.strip), SKY.margin)
+            scene = out.result.scene
+            frame_sky(out.undistorted, None if scene is None else scene.live, SKY)
             totals["sky"] = totals.get("sky", 0.0) + (time.perf_counter() - t0) * 1000
         t0 = time.perf_counter()
         composed.append(compose(out.undistorted, out.result, annotators))

@@ -63,6 +63,14 @@ def sky_side(scores: NDArray[np.float64], margin: float = 30.0) -> int | None:
     return int(ranked[0])
 
 
+def frame_sky(rgb: NDArray[np.uint8], live: Box | None, config: UprightConfig) -> int | None:
+    """One frame's vote: the side its sky stands out on within `live` (None: the whole frame),
+    or None where no side stands out."""
+    h, w = rgb.shape[:2]
+    scores = sky_scores(rgb, live or (0, 0, w, h), config.strip)
+    return sky_side(scores, config.margin)
+
+
 @dataclass(frozen=True)
 class SkyVote:
     """A clip's sky vote: the votes each side got, and the turn that stands it upright."""
@@ -96,5 +104,5 @@ def frames_vote(frames: Sequence[NDArray[np.uint8]], config: UprightConfig) -> S
         return sky_vote([], config.least, config.min_votes)
     brightest = np.max([f.max(axis=2) for f in frames], axis=0)
     live = live_box(brightest.max(axis=1), brightest.max(axis=0))
-    sides = [sky_side(sky_scores(f, live, config.strip), config.margin) for f in frames]
+    sides = [frame_sky(f, live, config) for f in frames]
     return sky_vote(sides, config.least, config.min_votes)
